@@ -1,0 +1,155 @@
+"""In-memory form of a case file (``../shared/case-format.md``, version 1).
+
+One frozen dataclass per group of the file. Arrays are float64, SI units, NaN for
+missing values. Optional groups are ``None`` when absent; optional datasets inside a
+group are ``None`` when absent, so that writing a case back reproduces the file it
+was read from.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FORMAT_NAME = "adcp-case"
+FORMAT_VERSION = 1
+ATTITUDE_FRAMES = ("vessel", "transducer")
+
+
+@dataclass(frozen=True)
+class Instrument:
+    """``/instrument``: beam geometry and the instrument's own Doppler settings."""
+
+    beam_angle_rad: float
+    transducer_radius_m: float
+    frequency_hz: float
+    sound_speed_m_s: float
+    n_beams: int = 4
+    layout: str = "janus4"
+    beam_dirs_t: np.ndarray | None = None  # (4, 3) override of the Janus beam vectors
+    beam_pos_t: np.ndarray | None = None  # (4, 3) override of the transducer positions
+
+    def beam_directions(self) -> np.ndarray:
+        """Outward unit beam vectors in the transducer frame, (4, 3)."""
+        if self.beam_dirs_t is not None:
+            return np.asarray(self.beam_dirs_t, dtype=float)
+        from ..models.janus import janus_beam_directions
+
+        return np.asarray(janus_beam_directions(self.beam_angle_rad), dtype=float)
+
+    def transducer_positions(self) -> np.ndarray:
+        """Transducer centres in the transducer frame relative to P, (4, 3)."""
+        if self.beam_pos_t is not None:
+            return np.asarray(self.beam_pos_t, dtype=float)
+        from ..models.janus import janus_transducer_positions
+
+        return np.asarray(janus_transducer_positions(self.transducer_radius_m), dtype=float)
+
+
+@dataclass(frozen=True)
+class Environment:
+    """``/environment``: flat bottom depth and the transducer depth when level (H_O)."""
+
+    water_depth_m: float
+    transducer_depth_m: float
+    water_depth_per_ping_m: np.ndarray | None = None  # (N,), overrides the attribute
+
+    def depth_at_pings(self, n_pings: int) -> np.ndarray:
+        """Bottom depth below the surface at each ping, (N,)."""
+        if self.water_depth_per_ping_m is not None:
+            return np.asarray(self.water_depth_per_ping_m, dtype=float)
+        return np.full(n_pings, float(self.water_depth_m))
+
+
+@dataclass(frozen=True)
+class Vessel:
+    """``/vessel``: optional hull figures for the empirical initial guesses."""
+
+    length_m: float | None = None
+    beam_m: float | None = None
+    height_m: float | None = None
+    mass_kg: float | None = None
+    draft_m: float | None = None
+    displaced_volume_m3: float | None = None
+
+
+@dataclass(frozen=True)
+class Pings:
+    """``/pings``: transmit times and bottom-track radial velocities."""
+
+    time_s: np.ndarray  # (N,)
+    bt_radial_m_s: np.ndarray  # (N, 4), positive when the bottom approaches
+    bt_range_m: np.ndarray | None = None  # (N, 4) slant ranges
+
+    @property
+    def n(self) -> int:
+        return int(self.time_s.shape[0])
+
+
+@dataclass(frozen=True)
+class Water:
+    """``/water``: profile of radial water velocities relative to the transducer."""
+
+    cell_depth_m: np.ndarray  # (K,)
+    radial_m_s: np.ndarray  # (N, 4, K)
+
+
+@dataclass(frozen=True)
+class Attitude:
+    """``/attitude``: low-rate sensor samples; ``frame`` says whose angles they are."""
+
+    time_s: np.ndarray  # (M,)
+    heading_rad: np.ndarray  # (M,)
+    pitch_rad: np.ndarray  # (M,)
+    roll_rad: np.ndarray  # (M,)
+    frame: str = "vessel"
+
+    def ypr(self) -> np.ndarray:
+        """(M, 3) yaw, pitch, roll with the heading unwrapped."""
+        return np.column_stack(
+            [np.unwrap(self.heading_rad), self.pitch_rad, self.roll_rad]
+        )
+
+
+@dataclass(frozen=True)
+class Reference:
+    """``/reference``: independent velocity of a point of the vessel (GNSS, video)."""
+
+    time_s: np.ndarray | None = None  # (L,)
+    velocity_m_s: np.ndarray | None = None  # (L, 3) Earth frame
+    point_body_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    stationary: bool = False
+
+
+@dataclass(frozen=True)
+class Truth:
+    """``/truth``: what a simulator used; absent from real and withheld cases."""
+
+    radius_vectors_m: np.ndarray  # (4, 3) body frame
+    installation_ypr_rad: np.ndarray  # (3,)
+    vessel_velocity_m_s: np.ndarray  # (N, 3)
+    water_velocity_m_s: np.ndarray | None = None  # (N, K, 3)
+    effects: list = field(default_factory=list)  # [{"name": ..., "params": {...}}]
+    extra_attrs: dict = field(default_factory=dict)  # other attributes, JSON strings
+
+
+@dataclass(frozen=True)
+class Case:
+    """One measurement run: what the instrument recorded, and truth when simulated."""
+
+    name: str
+    instrument: Instrument
+    environment: Environment
+    pings: Pings
+    attitude: Attitude
+    description: str = ""
+    vessel: Vessel = field(default_factory=Vessel)
+    water: Water | None = None
+    reference: Reference | None = None
+    truth: Truth | None = None
+
+    def replace(self, **changes) -> "Case":
+        """A copy with some fields replaced (``dataclasses.replace``)."""
+        return dataclasses.replace(self, **changes)

@@ -1,0 +1,46 @@
+"""Output of a correction: ``/corrected`` in its own HDF5 file, written atomically.
+
+Layout: ``/corrected/time_s`` (N,), ``vessel_velocity_m_s`` (N, 3),
+``error_velocity_m_s`` (N,), ``beams_used`` (N,), and with a profile
+``water_velocity_m_s`` (N, K, 3); attributes ``method``, ``source_case`` and the
+method's own settings (JSON).
+"""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+
+from .atomic import atomic_path
+
+
+def write_correction(correction, path, source_case: str = "") -> None:
+    """Write a :class:`~adcpdyn.estimators.asc.Correction` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = "adcp-corrected"
+            f.attrs["version"] = 1
+            g = f.create_group("corrected")
+            g.attrs["method"] = correction.method
+            g.attrs["source_case"] = str(source_case)
+            g.attrs["settings"] = json.dumps(correction.attrs)
+            g.create_dataset("time_s", data=np.asarray(correction.time_s, dtype=float))
+            g.create_dataset("vessel_velocity_m_s", data=np.asarray(correction.vessel_velocity_m_s, dtype=float))
+            g.create_dataset("error_velocity_m_s", data=np.asarray(correction.error_velocity_m_s, dtype=float))
+            g.create_dataset("beams_used", data=np.asarray(correction.beams_used, dtype=np.int8))
+            if correction.water_velocity_m_s is not None:
+                g.create_dataset("water_velocity_m_s", data=np.asarray(correction.water_velocity_m_s, dtype=float))
+
+
+def read_correction(path) -> dict:
+    """The ``/corrected`` group of a file as a dict of arrays plus ``method``."""
+    with h5py.File(path, "r") as f:
+        if "corrected" not in f:
+            raise ValueError(f"{path}: /corrected: group missing; expected the output of `adcpdyn correct`")
+        g = f["corrected"]
+        out = {k: g[k][()] for k in g}
+        out["method"] = g.attrs["method"]
+        out["settings"] = json.loads(g.attrs.get("settings", "{}"))
+    return out

@@ -1,0 +1,719 @@
+"""Read, validate and write case files (``../shared/case-format.md``, version 1).
+
+Every problem with a file is reported as a :class:`CaseFormatError` whose message is
+one line: ``<file>: <HDF5 path>: expected ..., got ...``. Attributes are named as
+``/group.attrs["name"]`` (the root group as ``/.attrs["name"]``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import contextlib
+import os
+import re
+
+import h5py
+import numpy as np
+
+from .atomic import atomic_path
+from .case import (
+    ATTITUDE_FRAMES,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    Attitude,
+    Case,
+    Environment,
+    Instrument,
+    Pings,
+    Reference,
+    Truth,
+    Vessel,
+    Water,
+)
+
+__all__ = ["CaseFormatError", "read_case", "write_case", "validate_case"]
+
+_VESSEL_FIELDS = (
+    "length_m",
+    "beam_m",
+    "height_m",
+    "mass_kg",
+    "draft_m",
+    "displaced_volume_m3",
+)
+_UNIT_TOL = 1e-6
+_HEADING_MAX = 2.0 * math.pi + 1e-9
+
+
+class CaseFormatError(ValueError):
+    """A case file (or in-memory case) does not follow the case format.
+
+    The message is a single line naming the file, the offending field and what was
+    expected versus found.
+    """
+
+
+def _one_line(text: str) -> str:
+    return re.sub(r"\s*[\r\n]+\s*", " ", text)
+
+
+def _num(x) -> str:
+    """Shortest exact text of a number (``repr`` of the float)."""
+    return repr(float(x))
+
+
+def _q(x) -> str:
+    """A value for a message: strings in double quotes, numpy scalars as plain numbers."""
+    if isinstance(x, str):
+        return json.dumps(x)
+    if isinstance(x, np.generic):
+        return repr(x.item())
+    return repr(x)
+
+
+def _attr(group_name: str, name: str) -> str:
+    return f'{group_name}.attrs["{name}"]'
+
+
+# ----------------------------------------------------------------------------------
+# validation of an in-memory case
+# ----------------------------------------------------------------------------------
+
+
+class _Checker:
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, field: str, msg: str):
+        raise CaseFormatError(_one_line(f"{self.source}: {field}: {msg}"))
+
+    def array(self, x, field: str) -> np.ndarray:
+        try:
+            a = np.asarray(x, dtype=np.float64)
+        except (TypeError, ValueError):
+            self.fail(field, f"expected a numeric array, got {type(x).__name__}")
+        return a
+
+    def shape(self, x, field: str, expected: tuple, spec: str | None = None,
+              origin: str = "") -> np.ndarray:
+        a = self.array(x, field)
+        if a.shape != tuple(expected):
+            spec = spec or str(tuple(expected))
+            where = f" {origin}" if origin else ""
+            self.fail(field, f"expected shape {spec}{where}, got {a.shape}")
+        return a
+
+    @staticmethod
+    def _index(a: np.ndarray, mask: np.ndarray) -> str:
+        idx = np.argwhere(mask)[0]
+        return str(int(idx[0])) if a.ndim == 1 else str(tuple(int(i) for i in idx))
+
+    def finite(self, a: np.ndarray, field: str, what: str = "values") -> None:
+        bad = ~np.isfinite(a)
+        if bad.any():
+            i = self._index(a, bad)
+            self.fail(field, f"expected finite {what}, got {a[bad][0]} at index {i}")
+
+    def no_inf(self, a: np.ndarray, field: str) -> None:
+        bad = np.isinf(a)
+        if bad.any():
+            i = self._index(a, bad)
+            self.fail(field, f"expected finite values or NaN, got {a[bad][0]} at index {i}")
+
+    def times(self, x, field: str, letter: str) -> np.ndarray:
+        a = self.array(x, field)
+        if a.ndim != 1:
+            self.fail(field, f"expected shape ({letter},), got {a.shape}")
+        if a.size == 0:
+            self.fail(field, f"expected at least one sample ({letter} >= 1), got 0")
+        self.finite(a, field, "times")
+        bad = np.flatnonzero(~(np.diff(a) > 0))
+        if bad.size:
+            i = int(bad[0]) + 1
+            self.fail(field, f"expected strictly increasing times, got {_num(a[i])} at "
+                             f"index {i} after {_num(a[i - 1])} at index {i - 1}")
+        return a
+
+    def scalar(self, x, field: str) -> float:
+        if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.number)):
+            self.fail(field, f"expected a number, got {_q(x)}")
+        return float(x)
+
+    def positive(self, x, field: str) -> float:
+        v = self.scalar(x, field)
+        if not (math.isfinite(v) and v > 0):
+            self.fail(field, f"expected a finite value > 0, got {_num(v)}")
+        return v
+
+    def non_negative(self, x, field: str) -> float:
+        v = self.scalar(x, field)
+        if not (math.isfinite(v) and v >= 0):
+            self.fail(field, f"expected a finite value >= 0, got {_num(v)}")
+        return v
+
+    def max_abs(self, a: np.ndarray, field: str, limit: float, what: str) -> None:
+        bad = np.abs(a) > limit
+        if bad.any():
+            i = self._index(a, bad)
+            self.fail(field, f"expected radians with {what}, got {_num(a[bad][0])} "
+                             f"at index {i} (degrees?)")
+
+    def string(self, x, field: str) -> str:
+        if not isinstance(x, str):
+            self.fail(field, f"expected a string, got {_q(x)}")
+        return x
+
+    def instance(self, x, cls, field: str) -> None:
+        if not isinstance(x, cls):
+            self.fail(field, f"expected {cls.__name__}, got {type(x).__name__}")
+
+
+def validate_case(case: Case, source: str = "<memory>") -> None:
+    """Check a case against the format and raise on the first problem found.
+
+    Parameters
+    ----------
+    case : Case
+        The case to check.
+    source : str, optional
+        Name used as the prefix of error messages (normally the file name).
+
+    Raises
+    ------
+    CaseFormatError
+        With a one-line message naming the HDF5 field, what was expected and what
+        was found: wrong shapes (in terms of N pings, M attitude samples, L reference
+        samples, K cells), times that are not finite and strictly increasing, angles
+        that look like degrees, non-finite attitude angles, unsupported beam layouts,
+        an all-NaN bottom-track beam, non-unit beam vectors, non-positive
+        frequency, sound speed or water depth, an unknown attitude frame, a moving
+        reference without samples, or malformed truth effects.
+    """
+    c = _Checker(source)
+    c.instance(case, Case, "/")
+    c.string(case.name, _attr("/", "name"))
+    c.string(case.description, _attr("/", "description"))
+
+    # /instrument
+    ins = case.instrument
+    c.instance(ins, Instrument, "/instrument")
+    g = "/instrument"
+    alpha = c.scalar(ins.beam_angle_rad, _attr(g, "beam_angle_rad"))
+    if not (0.0 < alpha < math.pi / 2):
+        c.fail(_attr(g, "beam_angle_rad"),
+               f"expected radians in (0, pi/2), got {_num(alpha)} (degrees?)")
+    c.non_negative(ins.transducer_radius_m, _attr(g, "transducer_radius_m"))
+    c.positive(ins.frequency_hz, _attr(g, "frequency_hz"))
+    c.positive(ins.sound_speed_m_s, _attr(g, "sound_speed_m_s"))
+    nb = ins.n_beams
+    if isinstance(nb, (bool, np.bool_)) or not isinstance(nb, (int, np.integer)) or nb != 4:
+        c.fail(_attr(g, "n_beams"), f"expected 4, got {_q(nb)}")
+    if ins.layout != "janus4":
+        c.fail(_attr(g, "layout"), f'expected "janus4", got {_q(ins.layout)}')
+    if ins.beam_dirs_t is not None:
+        f = "/instrument/beam_dirs_t"
+        d = c.shape(ins.beam_dirs_t, f, (4, 3))
+        c.finite(d, f)
+        norms = np.linalg.norm(d, axis=1)
+        bad = np.flatnonzero(np.abs(norms - 1.0) > _UNIT_TOL)
+        if bad.size:
+            i = int(bad[0])
+            c.fail(f, f"expected unit vectors (|d| = 1 within {_UNIT_TOL:g}), "
+                      f"got |d| = {_num(norms[i])} for beam {i + 1}")
+    if ins.beam_pos_t is not None:
+        f = "/instrument/beam_pos_t"
+        c.finite(c.shape(ins.beam_pos_t, f, (4, 3)), f)
+
+    # /pings (first: N is needed by the other groups)
+    p = case.pings
+    c.instance(p, Pings, "/pings")
+    t = c.times(p.time_s, "/pings/time_s", "N")
+    n = t.size
+    n_from = f"with N={n} from /pings/time_s"
+    f = "/pings/bt_radial_m_s"
+    bt = c.shape(p.bt_radial_m_s, f, (n, 4), "(N, 4)", n_from)
+    c.no_inf(bt, f)
+    dead = np.flatnonzero(np.isnan(bt).all(axis=0))
+    if dead.size:
+        c.fail(f, f"expected data in every beam, got all NaN in beam {int(dead[0]) + 1}")
+    if p.bt_range_m is not None:
+        f = "/pings/bt_range_m"
+        c.no_inf(c.shape(p.bt_range_m, f, (n, 4), "(N, 4)", n_from), f)
+
+    # /environment
+    env = case.environment
+    c.instance(env, Environment, "/environment")
+    g = "/environment"
+    c.positive(env.water_depth_m, _attr(g, "water_depth_m"))
+    c.non_negative(env.transducer_depth_m, _attr(g, "transducer_depth_m"))
+    if env.water_depth_per_ping_m is not None:
+        f = "/environment/water_depth_m"
+        wd = c.shape(env.water_depth_per_ping_m, f, (n,), "(N,)", n_from)
+        c.finite(wd, f)
+        if (wd <= 0).any():
+            i = int(np.flatnonzero(wd <= 0)[0])
+            c.fail(f, f"expected water depths > 0, got {_num(wd[i])} at index {i}")
+
+    # /vessel
+    c.instance(case.vessel, Vessel, "/vessel")
+    for name in _VESSEL_FIELDS:
+        v = getattr(case.vessel, name)
+        if v is not None:
+            c.positive(v, _attr("/vessel", name))
+
+    # /water
+    k = None
+    if case.water is not None:
+        w = case.water
+        c.instance(w, Water, "/water")
+        f = "/water/cell_depth_m"
+        cd = c.array(w.cell_depth_m, f)
+        if cd.ndim != 1:
+            c.fail(f, f"expected shape (K,), got {cd.shape}")
+        c.finite(cd, f)
+        k = cd.size
+        f = "/water/radial_m_s"
+        wr = c.shape(w.radial_m_s, f, (n, 4, k), "(N, 4, K)",
+                     f"with N={n} from /pings/time_s and K={k} from /water/cell_depth_m")
+        c.no_inf(wr, f)
+
+    # /attitude
+    a = case.attitude
+    c.instance(a, Attitude, "/attitude")
+    ta = c.times(a.time_s, "/attitude/time_s", "M")
+    m_from = f"with M={ta.size} from /attitude/time_s"
+    limits = {
+        "heading_rad": (_HEADING_MAX, "|heading| <= 2*pi"),
+        "pitch_rad": (math.pi / 2, "|pitch| <= pi/2"),
+        "roll_rad": (math.pi / 2, "|roll| <= pi/2"),
+    }
+    for name, (limit, what) in limits.items():
+        f = f"/attitude/{name}"
+        ang = c.shape(getattr(a, name), f, (ta.size,), "(M,)", m_from)
+        c.finite(ang, f, "attitude angles (NaN is not allowed here)")
+        c.max_abs(ang, f, limit, what)
+    if a.frame not in ATTITUDE_FRAMES:
+        allowed = ", ".join(f'"{x}"' for x in ATTITUDE_FRAMES)
+        c.fail(_attr("/attitude", "frame"), f"expected one of {allowed}, got {_q(a.frame)}")
+
+    # /reference
+    if case.reference is not None:
+        r = case.reference
+        c.instance(r, Reference, "/reference")
+        f = _attr("/reference", "point_body_m")
+        c.finite(c.shape(r.point_body_m, f, (3,)), f)
+        if not isinstance(r.stationary, (bool, np.bool_)):
+            c.fail(_attr("/reference", "stationary"), f"expected 0 or 1, got {_q(r.stationary)}")
+        if not r.stationary:
+            for name in ("time_s", "velocity_m_s"):
+                if getattr(r, name) is None:
+                    c.fail(f"/reference/{name}", 'expected a dataset when '
+                           '/reference.attrs["stationary"] is 0, got none')
+        if r.velocity_m_s is not None and r.time_s is None:
+            c.fail("/reference/time_s", "expected a dataset when "
+                   "/reference/velocity_m_s is present, got none")
+        if r.time_s is not None:
+            tr = c.times(r.time_s, "/reference/time_s", "L")
+            if r.velocity_m_s is not None:
+                f = "/reference/velocity_m_s"
+                c.no_inf(c.shape(r.velocity_m_s, f, (tr.size, 3), "(L, 3)",
+                                 f"with L={tr.size} from /reference/time_s"), f)
+
+    # /truth
+    if case.truth is not None:
+        tt = case.truth
+        c.instance(tt, Truth, "/truth")
+        f = "/truth/radius_vectors_m"
+        c.finite(c.shape(tt.radius_vectors_m, f, (4, 3)), f)
+        f = "/truth/installation_ypr_rad"
+        ypr = c.shape(tt.installation_ypr_rad, f, (3,))
+        c.finite(ypr, f)
+        c.max_abs(ypr, f, math.pi, "|angle| <= pi")
+        f = "/truth/vessel_velocity_m_s"
+        c.finite(c.shape(tt.vessel_velocity_m_s, f, (n, 3), "(N, 3)", n_from), f)
+        if tt.water_velocity_m_s is not None:
+            f = "/truth/water_velocity_m_s"
+            wv = c.array(tt.water_velocity_m_s, f)
+            if k is not None:
+                c.shape(wv, f, (n, k, 3), "(N, K, 3)",
+                        f"with N={n} from /pings/time_s and K={k} from /water/cell_depth_m")
+            elif wv.ndim != 3 or wv.shape[0] != n or wv.shape[2] != 3:
+                c.fail(f, f"expected shape (N, K, 3) {n_from}, got {wv.shape}")
+            c.no_inf(wv, f)
+        f = _attr("/truth", "effects")
+        if not isinstance(tt.effects, list):
+            c.fail(f, f"expected a JSON list, got {type(tt.effects).__name__}")
+        for i, e in enumerate(tt.effects):
+            if not (isinstance(e, dict) and isinstance(e.get("name"), str)
+                    and isinstance(e.get("params", {}), dict)):
+                c.fail(f, f'expected items {{"name": str, "params": {{...}}}}, '
+                          f"got item {i}: {json.dumps(e, default=repr)}")
+        try:
+            json.dumps(tt.effects)
+        except (TypeError, ValueError) as exc:
+            c.fail(f, f"expected JSON-serialisable effects, got {exc}")
+        if not isinstance(tt.extra_attrs, dict):
+            c.fail("/truth", f"expected extra_attrs as a dict, got {type(tt.extra_attrs).__name__}")
+        for key, val in tt.extra_attrs.items():
+            if not isinstance(key, str) or key == "effects" or not key:
+                c.fail("/truth", f"expected extra attribute names other than "
+                                 f'"effects", got {key!r}')
+            c.string(val, _attr("/truth", key))
+
+
+# ----------------------------------------------------------------------------------
+# reading
+# ----------------------------------------------------------------------------------
+
+
+class _Reader:
+    def __init__(self, source: str):
+        self.c = _Checker(source)
+
+    def group(self, parent: h5py.Group, name: str, required: bool = True):
+        path = f"{parent.name.rstrip('/')}/{name}"
+        obj = parent.get(name)
+        if obj is None:
+            if required:
+                self.c.fail(path, "expected a required group, got none (missing)")
+            return None
+        if not isinstance(obj, h5py.Group):
+            self.c.fail(path, "expected a group, got a dataset")
+        return obj
+
+    def dataset(self, grp: h5py.Group, name: str, required: bool = True):
+        path = f"{grp.name.rstrip('/')}/{name}"
+        obj = grp.get(name)
+        if obj is None:
+            if required:
+                self.c.fail(path, "expected a required dataset, got none (missing)")
+            return None
+        if not isinstance(obj, h5py.Dataset):
+            self.c.fail(path, "expected a dataset, got a group")
+        if obj.dtype.kind not in "iuf":
+            self.c.fail(path, f"expected a numeric dataset, got dtype {obj.dtype}")
+        return np.array(obj[()], dtype=np.float64)
+
+    def _raw_attr(self, grp: h5py.Group, name: str, required: bool):
+        if name not in grp.attrs:
+            if required:
+                self.c.fail(_attr(grp.name, name),
+                            "expected a required attribute, got none (missing)")
+            return None
+        try:
+            return grp.attrs[name]
+        except (OSError, TypeError) as exc:
+            self.c.fail(_attr(grp.name, name), f"expected a readable attribute, got {exc}")
+
+    def _numeric(self, grp, name, v) -> np.ndarray:
+        a = np.asarray(v) if not isinstance(v, (str, bytes)) else None
+        if a is None or a.dtype.kind not in "iufb":
+            shown = _text(v)
+            self.c.fail(_attr(grp.name, name),
+                        f"expected a number, got {_q(v if shown is None else shown)}")
+        return a
+
+    def scalar(self, grp, name, required=True, default=None):
+        v = self._raw_attr(grp, name, required)
+        if v is None:
+            return default
+        a = self._numeric(grp, name, v)
+        if a.size != 1:
+            self.c.fail(_attr(grp.name, name), f"expected a scalar, got shape {a.shape}")
+        return a.reshape(())[()]
+
+    def float_attr(self, grp, name, required=True, default=None):
+        v = self.scalar(grp, name, required, default)
+        return None if v is None else float(v)
+
+    def int_attr(self, grp, name, required=True, default=None):
+        v = self.scalar(grp, name, required, default)
+        if v is None:
+            return None
+        if not float(v).is_integer():
+            self.c.fail(_attr(grp.name, name), f"expected an integer, got {_num(v)}")
+        return int(v)
+
+    def vector_attr(self, grp, name, required=True, default=None):
+        v = self._raw_attr(grp, name, required)
+        if v is None:
+            return default
+        return np.array(self._numeric(grp, name, v), dtype=np.float64)
+
+    def str_attr(self, grp, name, required=True, default=None):
+        v = self._raw_attr(grp, name, required)
+        if v is None:
+            return default
+        s = _text(v)
+        if s is None:
+            self.c.fail(_attr(grp.name, name), f"expected a string, got {_q(v)}")
+        return s
+
+
+def _text(v) -> str | None:
+    """A str from a str/bytes attribute value (possibly a 1-element array), else None."""
+    if isinstance(v, np.ndarray) and v.size == 1:
+        v = v.reshape(())[()]
+    if isinstance(v, bytes):
+        try:
+            return v.decode("utf-8")
+        except UnicodeDecodeError:
+            return v.decode("latin-1")
+    if isinstance(v, str):
+        return str(v)
+    return None
+
+
+def _attr_as_text(v) -> str:
+    s = _text(v)
+    if s is not None:
+        return s
+    try:
+        return json.dumps(np.asarray(v).tolist())
+    except (TypeError, ValueError):
+        return str(v)
+
+
+def _read(f: h5py.File, rd: _Reader) -> Case:
+    root = f["/"]
+    fmt = rd.str_attr(root, "format")
+    if fmt != FORMAT_NAME:
+        rd.c.fail(_attr("/", "format"), f'expected "{FORMAT_NAME}", got {_q(fmt)}')
+    version = rd.scalar(root, "version")
+    if isinstance(version, (bool, np.bool_)) or version != FORMAT_VERSION:
+        rd.c.fail(_attr("/", "version"), f"expected {FORMAT_VERSION}, got {_q(version)}")
+    # A missing name is the only omission we forgive: the file's stem serves.
+    name = rd.str_attr(root, "name", required=False, default=None) or os.path.splitext(os.path.basename(f.filename))[0]
+    description = rd.str_attr(root, "description", required=False, default="")
+
+    g = rd.group(root, "instrument")
+    instrument = Instrument(
+        beam_angle_rad=rd.float_attr(g, "beam_angle_rad"),
+        transducer_radius_m=rd.float_attr(g, "transducer_radius_m"),
+        frequency_hz=rd.float_attr(g, "frequency_hz"),
+        sound_speed_m_s=rd.float_attr(g, "sound_speed_m_s"),
+        n_beams=rd.int_attr(g, "n_beams"),
+        layout=rd.str_attr(g, "layout"),
+        beam_dirs_t=rd.dataset(g, "beam_dirs_t", required=False),
+        beam_pos_t=rd.dataset(g, "beam_pos_t", required=False),
+    )
+
+    g = rd.group(root, "environment")
+    environment = Environment(
+        water_depth_m=rd.float_attr(g, "water_depth_m"),
+        transducer_depth_m=rd.float_attr(g, "transducer_depth_m"),
+        water_depth_per_ping_m=rd.dataset(g, "water_depth_m", required=False),
+    )
+
+    g = rd.group(root, "vessel", required=False)
+    vessel = Vessel() if g is None else Vessel(
+        **{k: rd.float_attr(g, k, required=False) for k in _VESSEL_FIELDS})
+
+    g = rd.group(root, "pings")
+    pings = Pings(
+        time_s=rd.dataset(g, "time_s"),
+        bt_radial_m_s=rd.dataset(g, "bt_radial_m_s"),
+        bt_range_m=rd.dataset(g, "bt_range_m", required=False),
+    )
+
+    g = rd.group(root, "water", required=False)
+    water = None if g is None else Water(
+        cell_depth_m=rd.dataset(g, "cell_depth_m"),
+        radial_m_s=rd.dataset(g, "radial_m_s"),
+    )
+
+    g = rd.group(root, "attitude")
+    attitude = Attitude(
+        time_s=rd.dataset(g, "time_s"),
+        heading_rad=rd.dataset(g, "heading_rad"),
+        pitch_rad=rd.dataset(g, "pitch_rad"),
+        roll_rad=rd.dataset(g, "roll_rad"),
+        frame=rd.str_attr(g, "frame"),
+    )
+
+    reference = None
+    g = rd.group(root, "reference", required=False)
+    if g is not None:
+        stationary = rd.int_attr(g, "stationary", required=False, default=0)
+        if stationary not in (0, 1):
+            rd.c.fail(_attr(g.name, "stationary"), f"expected 0 or 1, got {stationary}")
+        reference = Reference(
+            time_s=rd.dataset(g, "time_s", required=False),
+            velocity_m_s=rd.dataset(g, "velocity_m_s", required=False),
+            point_body_m=rd.vector_attr(g, "point_body_m", required=False,
+                                        default=np.zeros(3)),
+            stationary=bool(stationary),
+        )
+
+    truth = None
+    g = rd.group(root, "truth", required=False)
+    if g is not None:
+        text = rd.str_attr(g, "effects", required=False, default="[]")
+        try:
+            effects = json.loads(text)
+        except json.JSONDecodeError as exc:
+            rd.c.fail(_attr(g.name, "effects"), f"expected a JSON list, got invalid JSON ({exc})")
+        if not isinstance(effects, list):
+            rd.c.fail(_attr(g.name, "effects"),
+                      f"expected a JSON list, got {type(effects).__name__}")
+        extra = {}
+        for key in g.attrs:
+            if key == "effects":
+                continue
+            with contextlib.suppress(OSError, TypeError):
+                extra[key] = _attr_as_text(g.attrs[key])
+        truth = Truth(
+            radius_vectors_m=rd.dataset(g, "radius_vectors_m"),
+            installation_ypr_rad=rd.dataset(g, "installation_ypr_rad"),
+            vessel_velocity_m_s=rd.dataset(g, "vessel_velocity_m_s"),
+            water_velocity_m_s=rd.dataset(g, "water_velocity_m_s", required=False),
+            effects=effects,
+            extra_attrs=extra,
+        )
+
+    return Case(name=name, description=description, instrument=instrument,
+                environment=environment, vessel=vessel, pings=pings, water=water,
+                attitude=attitude, reference=reference, truth=truth)
+
+
+def read_case(path) -> Case:
+    """Read and validate a case file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The HDF5 case file.
+
+    Returns
+    -------
+    Case
+        Arrays as float64; optional groups and datasets that are absent are ``None``
+        (``/vessel`` absent gives ``Vessel()``). Unknown groups and attributes are
+        ignored, except that unknown ``/truth`` attributes go to
+        ``Truth.extra_attrs`` as strings.
+
+    Raises
+    ------
+    CaseFormatError
+        If the file is not HDF5 or does not follow the format (one-line message
+        prefixed by the file name, naming the field).
+    FileNotFoundError
+        If the file does not exist.
+    """
+    source = os.fspath(path)
+    rd = _Reader(source)
+    try:
+        f = h5py.File(source, "r")
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        rd.c.fail("/", f"expected an HDF5 file, got an unreadable file ({exc})")
+    with f:
+        case = _read(f, rd)
+    validate_case(case, source=source)
+    return case
+
+
+# ----------------------------------------------------------------------------------
+# writing
+# ----------------------------------------------------------------------------------
+
+
+def _ds(grp: h5py.Group, name: str, data) -> None:
+    if data is not None:
+        grp.create_dataset(name, data=np.asarray(data, dtype=np.float64))
+
+
+def _write(f: h5py.File, case: Case) -> None:
+    f.attrs["format"] = FORMAT_NAME
+    f.attrs["version"] = np.int64(FORMAT_VERSION)
+    f.attrs["name"] = case.name
+    f.attrs["description"] = case.description
+
+    ins = case.instrument
+    g = f.create_group("instrument")
+    g.attrs["beam_angle_rad"] = np.float64(ins.beam_angle_rad)
+    g.attrs["transducer_radius_m"] = np.float64(ins.transducer_radius_m)
+    g.attrs["frequency_hz"] = np.float64(ins.frequency_hz)
+    g.attrs["sound_speed_m_s"] = np.float64(ins.sound_speed_m_s)
+    g.attrs["n_beams"] = np.int64(ins.n_beams)
+    g.attrs["layout"] = str(ins.layout)
+    _ds(g, "beam_dirs_t", ins.beam_dirs_t)
+    _ds(g, "beam_pos_t", ins.beam_pos_t)
+
+    env = case.environment
+    g = f.create_group("environment")
+    g.attrs["water_depth_m"] = np.float64(env.water_depth_m)
+    g.attrs["transducer_depth_m"] = np.float64(env.transducer_depth_m)
+    _ds(g, "water_depth_m", env.water_depth_per_ping_m)
+
+    present = {k: getattr(case.vessel, k) for k in _VESSEL_FIELDS
+               if getattr(case.vessel, k) is not None}
+    if present:
+        g = f.create_group("vessel")
+        for k, v in present.items():
+            g.attrs[k] = np.float64(v)
+
+    g = f.create_group("pings")
+    _ds(g, "time_s", case.pings.time_s)
+    _ds(g, "bt_radial_m_s", case.pings.bt_radial_m_s)
+    _ds(g, "bt_range_m", case.pings.bt_range_m)
+
+    if case.water is not None:
+        g = f.create_group("water")
+        _ds(g, "cell_depth_m", case.water.cell_depth_m)
+        _ds(g, "radial_m_s", case.water.radial_m_s)
+
+    a = case.attitude
+    g = f.create_group("attitude")
+    for name in ("time_s", "heading_rad", "pitch_rad", "roll_rad"):
+        _ds(g, name, getattr(a, name))
+    g.attrs["frame"] = str(a.frame)
+
+    if case.reference is not None:
+        r = case.reference
+        g = f.create_group("reference")
+        _ds(g, "time_s", r.time_s)
+        _ds(g, "velocity_m_s", r.velocity_m_s)
+        g.attrs["point_body_m"] = np.asarray(r.point_body_m, dtype=np.float64)
+        g.attrs["stationary"] = np.int64(1 if r.stationary else 0)
+
+    if case.truth is not None:
+        t = case.truth
+        g = f.create_group("truth")
+        _ds(g, "radius_vectors_m", t.radius_vectors_m)
+        _ds(g, "installation_ypr_rad", t.installation_ypr_rad)
+        _ds(g, "vessel_velocity_m_s", t.vessel_velocity_m_s)
+        _ds(g, "water_velocity_m_s", t.water_velocity_m_s)
+        g.attrs["effects"] = json.dumps(t.effects)
+        for k, v in t.extra_attrs.items():
+            g.attrs[k] = str(v)
+
+
+def write_case(case: Case, path) -> None:
+    """Validate a case and write it atomically as a version-1 case file.
+
+    The file is written to a temporary file in the destination directory, flushed
+    to disk and moved onto ``path`` with :func:`os.replace`, so ``path`` is either
+    left untouched or holds the complete new file.
+
+    Parameters
+    ----------
+    case : Case
+        The case to write.
+    path : str or os.PathLike
+        Destination file; replaced if it exists.
+
+    Raises
+    ------
+    CaseFormatError
+        If the case is invalid (nothing is written).
+    OSError
+        If the file cannot be written (no temporary file is left behind).
+    """
+    target = os.fspath(path)
+    validate_case(case, source=target)
+    with atomic_path(target) as tmp:
+        with h5py.File(tmp, "w") as f:
+            _write(f, case)

@@ -1,0 +1,80 @@
+"""A readable summary of a case (``adcpdyn info``)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import lombscargle
+
+from .case import Case
+
+
+def dominant_period_s(t, x, f_min_hz=0.02, f_max_hz=3.0) -> float:
+    """Period of the strongest Lomb-Scargle peak of irregular samples (NaN if too few).
+
+    Irregular sampling keeps peaks above the mean Nyquist frequency distinguishable,
+    but with few samples per cycle the peak may still be an alias.
+    """
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if t.size < 8 or np.ptp(x) == 0:
+        return float("nan")
+    x = x - np.polyval(np.polyfit(t - t[0], x, 1), t - t[0])
+    f = np.linspace(f_min_hz, f_max_hz, 3000)
+    power = lombscargle(t, x, 2 * np.pi * f)
+    return float(1.0 / f[np.argmax(power)])
+
+
+def _intervals(t):
+    dt = np.diff(t)
+    return f"{dt.mean():.3f} s mean interval ({dt.min():.3f}-{dt.max():.3f} s)" if dt.size else "single sample"
+
+
+def summarise(case: Case) -> str:
+    """Multi-line description: instrument, durations, rates, motion, groups present."""
+    ins, env, p, a = case.instrument, case.environment, case.pings, case.attitude
+    dur = p.time_s[-1] - p.time_s[0]
+    lost = np.isnan(p.bt_radial_m_s)
+    lines = [
+        f"case         {case.name}: {case.description}",
+        f"instrument   {ins.layout}, beam angle {np.rad2deg(ins.beam_angle_rad):.2f} deg, "
+        f"f0 {ins.frequency_hz / 1e3:.1f} kHz, c {ins.sound_speed_m_s:.1f} m/s, tr {ins.transducer_radius_m * 100:.2f} cm"
+        + (", custom beam vectors" if ins.beam_dirs_t is not None else ""),
+        f"environment  water depth {env.water_depth_m:.2f} m"
+        + (" (per ping)" if env.water_depth_per_ping_m is not None else "")
+        + f", transducer depth {env.transducer_depth_m:.2f} m",
+        f"pings        {p.n} over {dur:.1f} s, {_intervals(p.time_s)}; lost beams {int(lost.sum())} of {lost.size}"
+        + ("; slant ranges" if p.bt_range_m is not None else ""),
+    ]
+    ypr = a.ypr()
+    amp = lambda x: 0.5 * (np.percentile(x, 99) - np.percentile(x, 1))
+    lines.append(f"attitude     {a.time_s.size} samples ({a.frame} frame), {_intervals(a.time_s)}")
+    for label, x in (("roll", ypr[:, 2]), ("pitch", ypr[:, 1])):
+        lines.append(
+            f"  {label:<6}     amplitude {np.rad2deg(amp(x)):.2f} deg, mean {np.rad2deg(np.mean(x)):.2f} deg, "
+            f"dominant period {dominant_period_s(a.time_s, x):.2f} s"
+        )
+    lines.append(f"  heading    {np.rad2deg(ypr[0, 0]) % 360:.1f} -> {np.rad2deg(ypr[-1, 0]) % 360:.1f} deg, "
+                 f"span {np.rad2deg(np.ptp(ypr[:, 0])):.1f} deg")
+    if case.water is not None:
+        d = case.water.cell_depth_m
+        lines.append(f"water        {d.size} cells, {d[0]:.2f}-{d[-1]:.2f} m deep")
+    if case.reference is not None:
+        r = case.reference
+        if r.velocity_m_s is not None and r.time_s is not None:
+            speed = np.nanmean(np.hypot(r.velocity_m_s[:, 0], r.velocity_m_s[:, 1]))
+            lines.append(f"reference    {r.time_s.size} samples, {_intervals(r.time_s)}, mean speed {speed:.3f} m/s, "
+                         f"point {np.round(r.point_body_m, 3).tolist()} m")
+        else:
+            lines.append("reference    stationary vessel (velocity zero)")
+    if case.vessel.length_m:
+        v = case.vessel
+        lines.append(f"vessel       {v.length_m} x {v.beam_m} x {v.height_m} m, {v.mass_kg} kg")
+    if case.truth is not None:
+        names = [e.get("name", "?") for e in case.truth.effects]
+        lines.append(f"truth        present; effects: {', '.join(names) if names else 'none'}")
+    groups = ["instrument", "environment", "pings", "attitude"] + [
+        g for g, present in (("vessel", case.vessel.length_m is not None), ("water", case.water is not None),
+                             ("reference", case.reference is not None), ("truth", case.truth is not None)) if present
+    ]
+    lines.append(f"groups       {', '.join(groups)}")
+    return "\n".join(lines)

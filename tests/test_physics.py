@@ -1,0 +1,241 @@
+"""Physics against identities, closed forms and limits (not against our own numbers)."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+from conftest import noise_free, with_doppler
+
+from adcpdyn.cases.scenario import get_scenario
+from adcpdyn.estimators.asc import asc
+from adcpdyn.models import doppler, janus
+from adcpdyn.models.empirical import motion_guess
+from adcpdyn.models.kinematics import radius_vectors
+from adcpdyn.models.motion import AttitudeParams, attitude_function, damped_mode, evaluate_attitude
+from adcpdyn.models.rotations import euler_matrices, euler_matrix, matrix_euler
+from adcpdyn.models.simulator import _echo, _Kinematics, simulate
+
+FD_TOL = 1e-6  # finite differences against algorithmic differentiation
+EXACT_TOL = 1e-9  # identities that hold to rounding
+
+RNG = np.random.default_rng(12)
+TWO_AXES = AttitudeParams(
+    roll_modes=np.array([[0.25, -0.05, 6.11, 0.112], [0.03, 0.0, 2.0, 0.0]]),
+    roll_bias=0.01,
+    pitch_modes=np.array([[0.1, 0.3, 4.6, 0.2]]),
+    pitch_bias=-0.02,
+    yaw_trend=np.array([0.7, 0.01, -1e-4]),
+    yaw_coupling=np.array([-0.3, 0.05, 0.1]),
+)
+TIMES = np.linspace(0.0, 20.0, 41)
+
+
+def test_rotation_is_orthonormal_and_inverts():
+    ypr = np.column_stack([RNG.uniform(-3, 3, 50), RNG.uniform(-1.4, 1.4, 50), RNG.uniform(-3, 3, 50)])
+    R = euler_matrices(ypr)
+    assert np.allclose(R @ R.transpose(0, 2, 1), np.eye(3), atol=EXACT_TOL)
+    assert np.allclose(np.linalg.det(R), 1.0, atol=EXACT_TOL)
+    back = np.array([np.asarray(matrix_euler(ca.DM(r))).ravel() for r in R])
+    assert np.allclose(back, ypr, atol=EXACT_TOL)
+
+
+def test_euler_matrix_closed_form_eq7():
+    psi, theta, phi = 0.3, -0.2, 0.5
+    c, s = np.cos, np.sin
+    eq7 = np.array([
+        [c(psi) * c(theta), c(psi) * s(theta) * s(phi) - s(psi) * c(phi), c(psi) * s(theta) * c(phi) + s(psi) * s(phi)],
+        [s(psi) * c(theta), s(psi) * s(theta) * s(phi) + c(psi) * c(phi), s(psi) * s(theta) * c(phi) - c(psi) * s(phi)],
+        [-s(theta), c(theta) * s(phi), c(theta) * c(phi)],
+    ])
+    assert np.allclose(np.asarray(euler_matrix(psi, theta, phi)), eq7, atol=EXACT_TOL)
+
+
+def test_damped_mode_solves_the_roll_equation():
+    """Eq. 34 solves phi'' + 2 v phi' + n^2 phi = 0 with n^2 = n1^2 + v^2 (Eq. 35), phi(t0)=A, phi'(t0)=0."""
+    t = ca.SX.sym("t")
+    A, t0, n1, v = 0.25, 0.4, 6.11, 0.15
+    phi = damped_mode(t, A, t0, n1, v)
+    d1 = ca.jacobian(phi, t)
+    d2 = ca.jacobian(d1, t)
+    f = ca.Function("f", [t], [phi, d1, d2 + 2 * v * d1 + (n1**2 + v**2) * phi])
+    for tk in np.linspace(0, 10, 23):
+        assert abs(float(f(tk)[2])) < 1e-9
+    assert float(f(t0)[0]) == pytest.approx(A, abs=EXACT_TOL)
+    assert float(f(t0)[1]) == pytest.approx(0.0, abs=EXACT_TOL)
+
+
+def test_omega_is_skew_and_matches_finite_differences():
+    out = evaluate_attitude(TWO_AXES, TIMES)
+    Om = out["Omega"]
+    assert np.max(np.abs(Om + Om.transpose(0, 2, 1))) < 1e-12
+    h = 1e-5
+    Lp = evaluate_attitude(TWO_AXES, TIMES + h)["Lambda"]
+    Lm = evaluate_attitude(TWO_AXES, TIMES - h)["Lambda"]
+    fd = (Lp - Lm) / (2 * h)
+    assert np.max(np.abs(fd - out["dLambda_dt"])) < FD_TOL
+    assert np.max(np.abs(fd @ out["Lambda"].transpose(0, 2, 1) - Om)) < FD_TOL
+
+
+def test_omega_axial_vector_matches_euler_rate_kinematics():
+    """Independent route: body rates from Euler rates (ZYX), rotated to the Earth frame."""
+    out = evaluate_attitude(TWO_AXES, TIMES)
+    h = 1e-5
+    rates = (evaluate_attitude(TWO_AXES, TIMES + h)["ypr"] - evaluate_attitude(TWO_AXES, TIMES - h)["ypr"]) / (2 * h)
+    psi_d, th_d, ph_d = rates.T
+    _, th, ph = out["ypr"].T
+    w_body = np.column_stack([
+        ph_d - psi_d * np.sin(th),
+        th_d * np.cos(ph) + psi_d * np.cos(th) * np.sin(ph),
+        -th_d * np.sin(ph) + psi_d * np.cos(th) * np.cos(ph),
+    ])
+    w_earth = np.einsum("nij,nj->ni", out["Lambda"], w_body)
+    assert np.max(np.abs(w_earth - out["omega"])) < FD_TOL
+
+
+def test_janus_least_squares_is_eq5_and_error_velocity_vanishes_for_rigid_motion():
+    a = np.deg2rad(30.0)
+    B = np.asarray(janus.janus_beam_directions(a))
+    M, e = janus.beam_to_instrument(B)
+    assert np.allclose(M, np.asarray(janus.beam_to_instrument_janus(a)), atol=EXACT_TOL)
+    v = RNG.normal(size=(20, 3))
+    radial = v @ B.T
+    assert np.allclose(radial @ M.T, v, atol=EXACT_TOL)
+    assert np.max(np.abs(radial @ e)) < EXACT_TOL
+    # RDI's error velocity for the Janus layout
+    r = RNG.normal(size=4)
+    assert r @ e == pytest.approx((r[0] + r[1] - r[2] - r[3]) / (2 * np.sqrt(2) * np.sin(a)), abs=EXACT_TOL)
+
+
+def test_three_beam_solution_recovers_rigid_velocity():
+    B = np.asarray(janus.janus_beam_directions(np.deg2rad(20.0)))
+    v = RNG.normal(size=(8, 3))
+    radial = v @ B.T
+    radial[np.arange(8), np.arange(8) % 4] = np.nan
+    radial[7, :2] = np.nan  # three beams lost: no solution
+    est, n_good = janus.three_beam_solution(B, radial)
+    assert np.allclose(est[:7], v[:7], atol=EXACT_TOL)
+    assert n_good.tolist() == [3] * 7 + [1]
+    assert np.all(np.isnan(est[7]))
+
+
+def test_radius_vectors_satisfy_janus_conditions():
+    tr = 0.0147
+    r = np.asarray(radius_vectors(np.deg2rad([45.0, 2.0, -3.0]), np.array([0.01, -0.02, 0.14]),
+                                  janus.janus_transducer_positions(tr)))
+    assert np.allclose((r[0] + r[1]) / 2, (r[2] + r[3]) / 2, atol=EXACT_TOL)  # midpoints coincide
+    assert abs((r[1] - r[0]) @ (r[2] - r[3])) < EXACT_TOL  # diagonals perpendicular
+    assert np.linalg.norm(r[1] - r[0]) == pytest.approx(2 * tr, abs=EXACT_TOL)
+    assert np.linalg.norm(r[2] - r[3]) == pytest.approx(2 * tr, abs=EXACT_TOL)
+
+
+def test_doppler_conversion_round_trips():
+    c = 1482.0
+    v = np.linspace(-9.5, 9.5, 101)
+    assert np.allclose(doppler.radial_from_ratio(doppler.ratio_from_radial(v, c), c), v, atol=1e-12)
+    # still transducer geometry: equal velocities at transmit and receive give back u exactly
+    u = RNG.uniform(-3, 3, 50)
+    assert np.allclose(doppler.radial_from_ratio(doppler.bottom_echo_ratio(u, u, c), c), u, atol=1e-12)
+    # water echo with a still transducer: radial = -w (water receding is negative)
+    w = RNG.uniform(-2, 2, 50)
+    ratio = doppler.water_echo_ratio(0 * w, 0 * w, w, w, c)
+    assert np.allclose(doppler.radial_from_ratio(ratio, c), -w, atol=1e-12)
+
+
+def test_no_rotation_radials_are_v_dot_d_and_asc_recovers_velocity(pool_still):
+    case = simulate(noise_free(pool_still), seed=4)
+    kin = _Kinematics(noise_free(pool_still))
+    tx = kin.at(case.pings.time_s)
+    expected = np.sum(tx["velocity"] * tx["d"], axis=-1)  # V_T . d
+    assert np.max(np.abs(case.pings.bt_radial_m_s - expected)) < EXACT_TOL
+    assert np.max(np.abs(tx["velocity"] - tx["vessel_velocity"][:, None, :])) < EXACT_TOL
+    result = asc(case)  # sensor in the head: no installation angles needed
+    assert np.max(np.abs(result.vessel_velocity_m_s - case.truth.vessel_velocity_m_s)) < EXACT_TOL
+
+
+def test_vessel_frame_sensor_needs_installation_angles():
+    sc = noise_free(get_scenario("deep_ship"))
+    sc = __import__("dataclasses").replace(sc, run=__import__("dataclasses").replace(
+        sc.run, motion=AttitudeParams(np.zeros((0, 4)), 0.0, np.zeros((0, 4)), 0.0, np.array([1.0]), np.zeros(0)),
+        duration_s=30.0))
+    case = simulate(sc, seed=2)
+    good = asc(case, case.truth.installation_ypr_rad)
+    assert np.max(np.abs(good.vessel_velocity_m_s - case.truth.vessel_velocity_m_s)) < EXACT_TOL
+    bad = asc(case)  # 7.4 degrees of installation yaw ignored
+    assert np.max(np.abs(bad.vessel_velocity_m_s - case.truth.vessel_velocity_m_s)) > 0.1
+
+
+def _two_way_vs_instantaneous(scenario):
+    sc = noise_free(scenario)
+    two_way = simulate(sc, seed=5).pings.bt_radial_m_s
+    inst = simulate(with_doppler(sc, timing="instantaneous"), seed=5).pings.bt_radial_m_s
+    kin = _Kinematics(sc)
+    t_T = simulate(sc, seed=5).pings.time_s
+    u_tx, u_rx, _, _, t_R, _ = _echo(kin, sc, t_T, kin.at(t_T), np.full((t_T.size, 1), sc.run.water_depth_m),
+                                     sc.platform.instrument.sound_speed_m_s)
+    return two_way, inst, u_tx, u_rx
+
+
+def test_shallow_water_two_way_agrees_with_instantaneous_within_txrx_difference(pool_m0):
+    two_way, inst, u_tx, u_rx = _two_way_vs_instantaneous(pool_m0)
+    # to first order the two-way radial is the mean of the transmit and receive projections
+    assert np.max(np.abs(two_way - (u_tx + u_rx) / 2)) < 1e-5
+    assert np.max(np.abs(two_way - inst)) <= np.max(np.abs(u_rx - u_tx)) / 2 + 1e-5
+    assert np.max(np.abs(two_way - inst)) < 2e-3  # 5 m: a few-ms round trip
+
+
+def test_deep_water_two_way_differs_from_instantaneous():
+    two_way, inst, u_tx, u_rx = _two_way_vs_instantaneous(get_scenario("deep_ocean"))
+    assert np.sqrt(np.mean((two_way - inst) ** 2)) > 0.02  # 300 m: the beams turn during the flight
+    assert np.max(np.abs(two_way - (u_tx + u_rx) / 2)) < 1e-3
+
+
+def test_exact_travel_time_closes_the_geometry():
+    sc = noise_free(get_scenario("deep_ocean"))
+    kin = _Kinematics(sc)
+    t_T = np.linspace(0, 100, 30)
+    tx = kin.at(t_T)
+    c = sc.platform.instrument.sound_speed_m_s
+    H = np.full((30, 1), sc.run.water_depth_m)
+    _, _, e_tx, _, t_R, l = _echo(kin, sc, t_T, tx, H, c)
+    spot = tx["position"] + l[..., None] * e_tx
+    rx = kin.at(t_R)
+    pos_R = rx["position"][np.arange(30)[:, None], np.arange(4)[None, :], np.arange(4)[None, :]]
+    back = np.linalg.norm(spot - pos_R, axis=-1)
+    assert np.max(np.abs(c * (t_R - t_T[:, None]) - l - back)) < 1e-6
+    assert np.allclose(spot[..., 2], sc.run.water_depth_m, atol=1e-9)
+
+
+def test_reference_velocity_is_lever_arm_consistent():
+    sc = noise_free(get_scenario("deep_ship"))
+    case = simulate(sc, seed=1)
+    kin = _Kinematics(sc)
+    t = case.reference.time_s[:20]
+    p = case.reference.point_body_m
+    h = 1e-4
+    pos = lambda tt: kin.track.position(tt) + np.einsum("nij,j->ni", kin.at(tt)["Lambda"], p)
+    fd = (pos(t + h) - pos(t - h)) / (2 * h)
+    assert np.max(np.abs(fd - case.reference.velocity_m_s[:20])) < 1e-5
+
+
+def test_head_sensor_reads_lambda_times_lambda_tb(pool_m0):
+    sc = noise_free(pool_m0)
+    case = simulate(sc, seed=3)
+    out = evaluate_attitude(sc.run.motion, case.attitude.time_s)
+    R = out["Lambda"] @ euler_matrices(np.asarray(sc.platform.mounting.installation_ypr_rad)[None, :])[0]
+    sensed = euler_matrices(case.attitude.ypr())
+    assert np.max(np.abs(sensed - R)) < EXACT_TOL
+
+
+def test_simulation_is_reproducible(pool_m0):
+    a, b, c = simulate(pool_m0, 7), simulate(pool_m0, 7), simulate(pool_m0, 8)
+    assert np.array_equal(a.pings.bt_radial_m_s, b.pings.bt_radial_m_s)
+    assert not np.array_equal(a.pings.bt_radial_m_s[:5], c.pings.bt_radial_m_s[:5])
+
+
+def test_empirical_guess_near_paper_initial_guess():
+    g = motion_guess(0.96, 0.2, 0.18, 18.0, 0.094, 0.018)
+    assert g.roll_damped_rad_s == pytest.approx(6.3192, rel=0.05)  # Table 1 initial guess
+    assert g.roll_damped_rad_s < g.roll_natural_rad_s
+    with pytest.raises(ValueError, match="beam_m"):
+        motion_guess(0.96, None, 0.18, 18.0)
