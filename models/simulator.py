@@ -20,7 +20,7 @@ import numpy as np
 
 from ..cases.case import Attitude, Case, Environment, Instrument, Pings, Reference, Truth, Water
 from ..cases.scenario import Scenario
-from .doppler import bottom_echo_ratio, radial_from_ratio, ratio_from_radial, slant_range, water_echo_ratio
+from .doppler import bottom_echo_ratio, radial_from_ratio, slant_range, water_echo_ratio
 from .janus import janus_beam_directions, janus_transducer_positions
 from .kinematics import radius_vectors, transducer_state_function
 from .motion import attitude_function, stack_matrices
@@ -182,7 +182,9 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
     elif run.reference_present:
         t_ref = irregular_times(rng, run.t_start_s, t_end, *run.reference_interval_s)
         ref_kin = kin.at(t_ref)
-        v_ref = ref_kin["vessel_velocity"] + np.einsum("nij,j->ni", ref_kin["dLambda_dt"], p_ref)
+        v_sym, dL_sym = ca.SX.sym("v", 3), ca.SX.sym("dL", 3, 3)
+        ref_fun = ca.Function("ref", [v_sym, dL_sym], [reference_point_velocity(v_sym, dL_sym, p_ref)]).map(t_ref.size)
+        v_ref = np.asarray(ref_fun(ref_kin["vessel_velocity"].T, ref_kin["dLambda_dt"].transpose(1, 0, 2).reshape(3, -1))).T
         v_ref = v_ref + rng.normal(size=v_ref.shape) * noise.reference_m_s
         reference = Reference(time_s=t_ref, velocity_m_s=v_ref, point_body_m=p_ref)
 
@@ -218,5 +220,3 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         truth=truth,
     )
 
-
-__all__ = ["simulate", "ratio_from_radial"]

@@ -239,3 +239,18 @@ def test_empirical_guess_near_paper_initial_guess():
     assert g.roll_damped_rad_s < g.roll_natural_rad_s
     with pytest.raises(ValueError, match="beam_m"):
         motion_guess(0.96, None, 0.18, 18.0)
+
+
+def test_no_rotation_asc_recovers_water_profile():
+    """Still ship, steady current: bt - water radial is the Earth radial water velocity (Eq. 4)."""
+    import dataclasses
+
+    sc = noise_free(get_scenario("deep_ocean"))
+    still = AttitudeParams(np.zeros((0, 4)), 0.0, np.zeros((0, 4)), 0.0, np.array([0.3]), np.zeros(0))
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, motion=still, duration_s=20.0))
+    case = simulate(sc, seed=1)
+    result = asc(case, case.truth.installation_ypr_rad)
+    measured = np.isfinite(result.water_velocity_m_s[..., 0])
+    assert measured.mean() > 0.5
+    err = result.water_velocity_m_s[measured] - case.truth.water_velocity_m_s[measured]
+    assert np.max(np.abs(err)) < 1e-5  # second order in speed / c only
