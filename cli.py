@@ -72,6 +72,85 @@ def cmd_correct(args) -> int:
     return 0
 
 
+def _calibration_config(args, formulation=None):
+    from .estimators.calibration import CalibrationConfig
+
+    return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
+                             method=args.method, timing=args.timing, tangential=args.tangential)
+
+
+def cmd_calibrate(args) -> int:
+    import warnings
+
+    from .cases.atomic import refuse_overwrite_input
+    from .estimators.calibration import CalibrationProblem
+
+    refuse_overwrite_input(args.out, args.case)
+    case = _read(args.case)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # every warning is written into the result and printed below
+        result = CalibrationProblem(case, _calibration_config(args)).solve()
+    result.to_json(args.out)
+    ms = result.multistart
+    print(f"{case.name}: {args.method} calibration, formulation {result.formulation}, {result.timing}-water model")
+    print(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
+          f"{result.max_constraint_violation:.2e}; {ms.time_s:.2f} s")
+    label = "head-frame lever arms (m)" if result.attitude_frame == "transducer" else "radius vectors, body frame (m)"
+    print(label + "  [value +- se]")
+    for i in range(4):
+        cells = "  ".join(f"{v:+.4f} +- {s:.4f}" if np.isfinite(s) else "  (not determined)  "
+                          for v, s in zip(result.lever_arms_sensor_m[i], result.lever_arms_sensor_se_m[i]))
+        print(f"  r{i + 1}: {cells}")
+    if result.installation_determined:
+        print("installation yaw/pitch/roll (deg): " + ", ".join(
+            f"{np.rad2deg(v):+.4f} +- {np.rad2deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad)))
+    print("noise sigma: " + ", ".join(f"{k} {v:.4g}" for k, v in result.noise_sigma.items()))
+    for w in result.warnings:
+        print(f"warning: {w}")
+    print(f"wrote {args.out}")
+    return 0 if result.success else 1
+
+
+def cmd_compare_formulations(args) -> int:
+    import time
+    import warnings
+
+    from .estimators.calibration import CalibrationProblem
+    from .estimators.evaluation import calibration_errors
+    from .estimators.formulations import FORMULATIONS
+
+    case = _read(args.case)
+    head = f"{'formulation':<12}{'objective':>12}{'max viol':>10}{'time s':>8}{'at best':>9}{'unobs':>7}{'weak':>6}"
+    if case.truth is not None:
+        head += f"{'tang rms mm/s':>15}{'lever rms mm':>14}"
+    print(head)
+    rows = {}
+    for form in FORMULATIONS:
+        tic = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            r = CalibrationProblem(case, _calibration_config(args, form)).solve()
+        elapsed = time.perf_counter() - tic
+        kinds = [u["kind"] for u in r.uncertainty.unobservable if "attitude-model" not in u["description"]]
+        line = (f"{form:<12}{r.objective:>12.5g}{r.max_constraint_violation:>10.1e}{elapsed:>8.2f}"
+                f"{r.multistart.fraction_at_best:>9.2f}{kinds.count('unobservable'):>7d}{kinds.count('weak'):>6d}")
+        row = {"objective": r.objective, "max_constraint_violation": r.max_constraint_violation, "time_s": elapsed,
+               "fraction_at_best": r.multistart.fraction_at_best, "success": r.success,
+               "unobservable": [u for u in r.uncertainty.unobservable if "attitude-model" not in u["description"]]}
+        if case.truth is not None:
+            e = calibration_errors(case, r)
+            line += f"{1e3 * e['tangential_radial_rms_m_s']:>15.3f}{1e3 * e['lever_arm_rms_error_m']:>14.2f}"
+            row.update(e)
+        print(line)
+        rows[form] = row
+    if args.out:
+        from .estimators.calibration import _jsonable
+
+        with open(args.out, "w") as fh:
+            json.dump(_jsonable(rows), fh, indent=2)
+    return 0
+
+
 def cmd_demo(args) -> int:
     """The main job on the built-in default case: simulate, ASC-correct, tabulate, plot."""
     import matplotlib
@@ -143,6 +222,26 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--calibration", help="CALIB.json with installation_ypr_rad")
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_correct)
+
+    def calibration_options(s):
+        s.add_argument("--formulation", default="exact", help="paper | exact | minimal | free")
+        s.add_argument("--starts", type=int, default=24, help="multistart size")
+        s.add_argument("--seed", type=int, default=0, help="seed of the start design")
+        s.add_argument("--method", default="joint", help="joint | two-stage")
+        s.add_argument("--timing", default="auto", help="auto | shallow | deep bottom-track model")
+        s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
+
+    s = sub.add_parser("calibrate", help="estimate attitude model, lever arms and installation angles")
+    s.add_argument("case")
+    calibration_options(s)
+    s.add_argument("--out", required=True, help="CALIB.json")
+    s.set_defaults(func=cmd_calibrate)
+
+    s = sub.add_parser("compare-formulations", help="calibrate with every constraint formulation and tabulate")
+    s.add_argument("case")
+    calibration_options(s)
+    s.add_argument("--out", help="optional JSON of the table")
+    s.set_defaults(func=cmd_compare_formulations)
 
     s = sub.add_parser("demo", help="the main job on the built-in default case")
     s.add_argument("--scenario", default=DEFAULT_CASE)

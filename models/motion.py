@@ -7,7 +7,11 @@ same curve, since theta_a cos(x - eps) = theta_0 (cos x + v/n sin x) by Eq. 42):
     a(t) = A exp(-v (t - t0)) [cos n1 (t - t0) + (v / n1) sin n1 (t - t0)]
 
 with n1 the damped circular frequency (Eq. 35) and v the decay rate; v = 0 gives a
-steady wave-forced oscillation. Yaw is a slow polynomial trend plus the roll and
+steady wave-forced oscillation. Internally a mode is written about a fixed reference
+time t_ref as exp(-v (t - t_ref)) [C cos n1 (t - t_ref) + S sin n1 (t - t_ref)]: the
+same family, but linear in (C, S), so no two parameter sets give the same curve
+(the paper's (A, t0) repeats itself every period). :func:`paper_to_cs` and
+:func:`cs_to_paper` convert exactly. Yaw is a slow polynomial trend plus the roll and
 pitch oscillations, each scaled by a coupling coefficient, so it shares their
 frequencies and decays (the paper fits yaw with the roll model's t0 and n1).
 
@@ -25,7 +29,7 @@ import numpy as np
 
 from .rotations import euler_matrix, unskew
 
-MODE_FIELDS = ("amplitude_rad", "t0_s", "omega_rad_s", "decay_1_s")
+MODE_FIELDS = ("cos_rad", "sin_rad", "omega_rad_s", "decay_1_s")
 
 
 def damped_mode(t, amplitude, t0, omega, decay):
@@ -34,6 +38,31 @@ def damped_mode(t, amplitude, t0, omega, decay):
     return amplitude * ca.exp(-decay * tau) * (
         ca.cos(omega * tau) + decay / omega * ca.sin(omega * tau)
     )
+
+
+def mode_cs(t, c, s, omega, decay, t_ref):
+    """exp(-v (t - t_ref)) [C cos n1 (t - t_ref) + S sin n1 (t - t_ref)]: Eq. 34 about t_ref."""
+    tau = t - t_ref
+    return ca.exp(-decay * tau) * (c * ca.cos(omega * tau) + s * ca.sin(omega * tau))
+
+
+def paper_to_cs(amplitude, t0, omega, decay, t_ref):
+    """(A, t0) of Eq. 34 -> (C, S) about t_ref, exactly."""
+    d = t_ref - t0
+    g = amplitude * np.exp(-decay * d)
+    k = decay / omega
+    return g * (np.cos(omega * d) + k * np.sin(omega * d)), g * (-np.sin(omega * d) + k * np.cos(omega * d))
+
+
+def cs_to_paper(c, s, omega, decay, t_ref):
+    """(C, S) about t_ref -> the paper's (phi_0, t_0) with t_0 within half a period of t_ref."""
+    eps = np.arctan2(decay, omega)
+    delta = np.arctan2(s, c)
+    period = 2 * np.pi / omega
+    t0 = t_ref + (delta - eps) / omega
+    t0 = t_ref + (t0 - t_ref + period / 2) % period - period / 2
+    amplitude = np.hypot(c, s) * np.exp(-decay * (t0 - t_ref)) / np.sqrt(1 + (decay / omega) ** 2)
+    return amplitude, t0
 
 
 @dataclass(frozen=True)
@@ -86,8 +115,8 @@ class AttitudeLayout:
 class AttitudeParams:
     """Numbers of one attitude model; ``pack``/``unpack`` map to the flat vector.
 
-    roll_modes and pitch_modes are (n, 4) arrays of (amplitude_rad, t0_s,
-    omega_rad_s, decay_1_s); yaw_trend holds polynomial coefficients in
+    roll_modes and pitch_modes are (n, 4) arrays of (C_rad, S_rad, omega_rad_s,
+    decay_1_s) about t_ref_s (see :func:`mode_cs`); yaw_trend holds polynomial coefficients in
     (t - t_ref_s), lowest order first; yaw_coupling scales each roll mode then each
     pitch mode into the yaw oscillation.
     """
@@ -144,13 +173,23 @@ class AttitudeParams:
         )
 
     def to_dict(self) -> dict:
-        """JSON-ready description (per axis, named fields)."""
+        """JSON-ready description per axis; each mode also in the paper's (phi_0, t_0) form."""
+
+        def modes(rows):
+            out = []
+            for m in rows:
+                d = dict(zip(MODE_FIELDS, map(float, m)))
+                a, t0 = cs_to_paper(*m, self.t_ref_s)
+                d.update(paper_amplitude_rad=float(a), paper_t0_s=float(t0))
+                out.append(d)
+            return out
+
         return {
-            "roll": {"bias_rad": self.roll_bias, "modes": [dict(zip(MODE_FIELDS, map(float, m))) for m in self.roll_modes]},
-            "pitch": {"bias_rad": self.pitch_bias, "modes": [dict(zip(MODE_FIELDS, map(float, m))) for m in self.pitch_modes]},
+            "t_ref_s": float(self.t_ref_s),
+            "roll": {"bias_rad": self.roll_bias, "modes": modes(self.roll_modes)},
+            "pitch": {"bias_rad": self.pitch_bias, "modes": modes(self.pitch_modes)},
             "yaw": {
                 "trend_coefficients": [float(c) for c in self.yaw_trend],
-                "t_ref_s": float(self.t_ref_s),
                 "coupling": [float(c) for c in self.yaw_coupling],
             },
         }
@@ -168,7 +207,7 @@ class AttitudeParams:
             pitch_bias=float(d["pitch"]["bias_rad"]),
             yaw_trend=np.array(d["yaw"]["trend_coefficients"], dtype=float),
             yaw_coupling=np.array(d["yaw"]["coupling"], dtype=float),
-            t_ref_s=float(d["yaw"].get("t_ref_s", 0.0)),
+            t_ref_s=float(d.get("t_ref_s", 0.0)),
         )
 
 
@@ -178,7 +217,7 @@ def attitude_ypr(t, p, layout: AttitudeLayout):
 
     def oscillations(block, n):
         q = p[s[block]]
-        return [damped_mode(t, q[4 * k], q[4 * k + 1], q[4 * k + 2], q[4 * k + 3]) for k in range(n)]
+        return [mode_cs(t, q[4 * k], q[4 * k + 1], q[4 * k + 2], q[4 * k + 3], layout.t_ref_s) for k in range(n)]
 
     roll_osc = oscillations("roll_modes", layout.n_roll)
     pitch_osc = oscillations("pitch_modes", layout.n_pitch)

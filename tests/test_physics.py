@@ -254,3 +254,19 @@ def test_no_rotation_asc_recovers_water_profile():
     assert measured.mean() > 0.5
     err = result.water_velocity_m_s[measured] - case.truth.water_velocity_m_s[measured]
     assert np.max(np.abs(err)) < 1e-5  # second order in speed / c only
+
+
+@pytest.mark.parametrize("amplitude,t0,omega,decay", [(0.25, -0.05, 6.11, 0.112), (-0.2, 1.14, 6.19, 0.6), (0.03, 3.0, 1.05, 0.0)])
+def test_cs_form_is_the_papers_eq34_and_converts_back(amplitude, t0, omega, decay):
+    from adcpdyn.models.motion import cs_to_paper, mode_cs, paper_to_cs
+
+    t_ref = 0.7
+    c, s = paper_to_cs(amplitude, t0, omega, decay, t_ref)
+    t = np.linspace(-1, 20, 57)
+    paper = np.asarray(ca.Function("f", [], [damped_mode(ca.DM(t), amplitude, t0, omega, decay)])()["o0"]).ravel()
+    ours = np.asarray(ca.Function("g", [], [mode_cs(ca.DM(t), c, s, omega, decay, t_ref)])()["o0"]).ravel()
+    assert np.allclose(paper, ours, atol=1e-12)
+    a2, t02 = cs_to_paper(c, s, omega, decay, t_ref)
+    again = np.asarray(ca.Function("h", [], [damped_mode(ca.DM(t), a2, t02, omega, decay)])()["o0"]).ravel()
+    assert np.allclose(again, paper, atol=1e-12)
+    assert abs(t02 - t_ref) <= np.pi / omega + 1e-12

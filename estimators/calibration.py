@@ -1,0 +1,647 @@
+"""Joint calibration: ONE maximum-likelihood NLP for the attitude model, the lever arms
+and the installation angles, solved by IPOPT from many starts.
+
+Unknowns (scaled to order one): the sensor-frame attitude model (bias and damped modes
+per axis, yaw trend and couplings; number of modes chosen by BIC in an attitude-only
+pre-fit), the installation angles (vessel-frame sensor only: a sensor inside the head
+cannot see them, ``../shared/notes-on-the-paper.md``), the lever-arm block of the
+chosen formulation (:mod:`.formulations`), and the navigation velocity of G as a
+piecewise-linear curve when the vessel moves. The objective is half the sum of
+squared noise-weighted residuals of every channel the case holds: attitude samples,
+bottom-track radial velocities (shallow Eq. 52 or deep Eqs. 65-70, chosen from the
+round-trip time), slant ranges, reference velocity (with its lever arm, erratum 6).
+Omega(t) and the beam directions come from the same symbolic attitude model.
+Noise levels start from independent estimates (attitude pre-fit residuals, the
+error velocity for bottom track) and are re-estimated from the fit's residuals.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import asdict, dataclass, field
+
+import casadi as ca
+import numpy as np
+from scipy.stats import qmc
+
+from ..cases.case import Case
+from ..models.janus import beam_to_instrument
+from ..models.measurement import bottom_track_function
+from ..models.motion import AttitudeLayout, AttitudeParams, attitude_function
+from ..models.rotations import euler_matrix
+from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
+from .attitude_fit import AttitudeFit, fit_attitude
+from .formulations import AXES, FORMULATIONS, lever_block
+from .uncertainty import Uncertainty, uncertainty
+
+TIMINGS = ("auto", "shallow", "deep")
+METHODS = ("joint", "two-stage")
+TANGENTIALS = ("consistent", "paper_literal")
+DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
+ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """Settings of a joint calibration.
+
+    Parameters
+    ----------
+    formulation : str
+        Lever-arm formulation, one of ``paper``, ``exact``, ``minimal``, ``free``.
+    n_starts : int
+        Multistart size (the attitude pre-fit, the empirical guess and a Latin
+        hypercube design over the start region fill it).
+    seed : int
+        Seed of the start design.
+    timing : str
+        ``auto`` (deep when the round trip exceeds 1% of the motion period), ``shallow`` or ``deep``.
+    max_modes : int
+        Most damped modes per axis tried by the pre-fit's information criterion.
+    modes : int, optional
+        Exactly this many modes per axis (the paper uses 1).
+    estimate_noise : bool
+        Re-estimate each channel's noise from the residuals and solve again.
+    velocity_knot_interval_s : float, optional
+        Spacing of the navigation-velocity knots (default: from the data rates).
+    lever_box_m : float, optional
+        Bound on every lever-arm coordinate (default: half the vessel length, else 10 m).
+    installation_bound_rad : float
+        Bound on each installation angle (vessel-frame sensors).
+    nominal_installation_ypr_rad : tuple
+        Installation angles used where the data cannot give them (head sensor).
+    epsilon_rel : float
+        ``paper`` formulation: relaxation of the Janus conditions.
+    use_ranges : bool
+        Include slant ranges when the case has them.
+    method : str
+        ``joint`` (everything in one NLP) or ``two-stage`` (the paper: a one-mode fit of
+        each attitude axis, then the lever arms with that attitude frozen and the
+        installation angles at their nominal values).
+    tangential : str
+        ``consistent`` (dLambda/dt r) or ``paper_literal`` (Omega r as printed).
+    solver : SolverOptions
+    """
+
+    formulation: str = "exact"
+    method: str = "joint"
+    tangential: str = "consistent"
+    n_starts: int = 24
+    seed: int = 0
+    timing: str = "auto"
+    max_modes: int = 3
+    modes: int | None = None
+    estimate_noise: bool = True
+    velocity_knot_interval_s: float | None = None
+    lever_box_m: float | None = None
+    installation_bound_rad: float = float(np.deg2rad(15.0))
+    nominal_installation_ypr_rad: tuple = (0.0, 0.0, 0.0)
+    epsilon_rel: float = 0.05
+    use_ranges: bool = True
+    solver: SolverOptions = field(default_factory=SolverOptions)
+
+    def __post_init__(self):
+        if self.formulation not in FORMULATIONS:
+            raise ValueError(f"CalibrationConfig.formulation: expected one of {list(FORMULATIONS)}, got {self.formulation!r}")
+        if self.timing not in TIMINGS:
+            raise ValueError(f"CalibrationConfig.timing: expected one of {list(TIMINGS)}, got {self.timing!r}")
+        if self.method not in METHODS:
+            raise ValueError(f"CalibrationConfig.method: expected one of {list(METHODS)}, got {self.method!r}")
+        if self.tangential not in TANGENTIALS:
+            raise ValueError(f"CalibrationConfig.tangential: expected one of {list(TANGENTIALS)}, got {self.tangential!r}")
+        if int(self.n_starts) < 1:
+            raise ValueError(f"CalibrationConfig.n_starts: expected >= 1, got {self.n_starts}")
+
+
+@dataclass
+class CalibrationResult:
+    """Estimates with standard errors, the solver's own account, and what is not determined."""
+
+    radius_vectors_m: np.ndarray
+    radius_vectors_se_m: np.ndarray
+    installation_ypr_rad: np.ndarray
+    installation_ypr_se_rad: np.ndarray
+    installation_determined: bool
+    attitude: AttitudeParams
+    attitude_frame: str
+    lever_arms_sensor_m: np.ndarray  # lever arms in the sensor frame (head frame for a head sensor)
+    lever_arms_sensor_se_m: np.ndarray
+    objective: float
+    max_constraint_violation: float
+    formulation: str
+    timing: str
+    noise_sigma: dict
+    chi2_per_channel: dict
+    multistart: MultistartResult
+    uncertainty: Uncertainty
+    x_names: list
+    x: np.ndarray
+    x_se: np.ndarray
+    config: CalibrationConfig
+    velocity_knots_s: np.ndarray | None = None
+    velocity_knots_m_s: np.ndarray | None = None
+    warnings: list = field(default_factory=list)
+
+    @property
+    def success(self) -> bool:
+        return bool(self.multistart.success)
+
+    def to_dict(self) -> dict:
+        ms = self.multistart
+        def determined(values, se):  # a number the data do not fix is not an estimate: null
+            return np.where(np.isfinite(se), values, np.nan).tolist()
+
+        out = {
+            "radius_vectors_m": determined(self.radius_vectors_m, self.radius_vectors_se_m),
+            "radius_vectors_se_m": self.radius_vectors_se_m.tolist(),
+            "installation_ypr_rad": determined(self.installation_ypr_rad, self.installation_ypr_se_rad),
+            "installation_ypr_assumed_rad": self.installation_ypr_rad.tolist(),
+            "installation_ypr_se_rad": self.installation_ypr_se_rad.tolist(),
+            "installation_determined": self.installation_determined,
+            "attitude_frame": self.attitude_frame,
+            "attitude_model": self.attitude.to_dict(),
+            "objective": self.objective,
+            "max_constraint_violation": self.max_constraint_violation,
+            "formulation": self.formulation,
+            "timing": self.timing,
+            "noise_sigma": self.noise_sigma,
+            "chi2_per_channel": self.chi2_per_channel,
+            "solver": {
+                "success": ms.success,
+                "status": ms.status,
+                "message": ms.message,
+                "iterations": ms.iterations,
+                "time_s": ms.time_s,
+                "n_groups": ms.n_groups,
+                "fraction_at_best": ms.fraction_at_best,
+                "best_start": ms.best_start,
+                "options": asdict(self.config.solver),
+            },
+            "starts": [s.to_dict() for s in ms.starts],
+            "unobservable": self.uncertainty.unobservable,
+            "parameters": {n: {"value": float(v) if np.isfinite(s) else None, "se": float(s)}
+                           for n, v, s in zip(self.x_names, self.x, self.x_se)},
+            "warnings": self.warnings,
+            "config": {k: v for k, v in asdict(self.config).items() if k != "solver"},
+        }
+        if self.attitude_frame == "transducer":
+            out["radius_vectors_head_m"] = determined(self.lever_arms_sensor_m, self.lever_arms_sensor_se_m)
+            out["radius_vectors_head_se_m"] = self.lever_arms_sensor_se_m.tolist()
+        if self.velocity_knots_s is not None:
+            out["velocity_model"] = {"knot_times_s": self.velocity_knots_s.tolist(),
+                                     "knot_velocities_m_s": self.velocity_knots_m_s.tolist()}
+        return out
+
+    def to_json(self, path) -> None:
+        from ..cases.atomic import atomic_path
+
+        with atomic_path(path) as tmp:
+            with open(tmp, "w") as fh:
+                json.dump(_jsonable(self.to_dict()), fh, indent=2)
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    return obj
+
+
+def _hat_basis(times, knots) -> np.ndarray:
+    """Piecewise-linear interpolation weights, (len(times), len(knots))."""
+    eye = np.eye(len(knots))
+    return np.column_stack([np.interp(times, knots, eye[:, k]) for k in range(len(knots))])
+
+
+def dominant_period_s(fit: AttitudeFit) -> float:
+    modes = np.vstack([fit.roll.modes, fit.pitch.modes])
+    if modes.size == 0:
+        return np.inf
+    amp = np.hypot(modes[:, 0], modes[:, 1])
+    return float(2 * np.pi / modes[int(np.argmax(amp)), 2])
+
+
+def choose_timing(case: Case, fit: AttitudeFit, requested: str = "auto") -> str:
+    """Shallow or deep bottom-track model: deep when the round trip matters."""
+    if requested != "auto":
+        return requested
+    c = case.instrument.sound_speed_m_s
+    depth = np.max(case.environment.depth_at_pings(case.pings.n)) - case.environment.transducer_depth_m
+    round_trip = 2 * depth / (c * np.cos(case.instrument.beam_angle_rad))
+    return "deep" if round_trip > DEEP_TIMING_FRACTION * dominant_period_s(fit) else "shallow"
+
+
+def bt_noise_from_error_velocity(case: Case) -> float:
+    """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
+    B = case.instrument.beam_directions()
+    _, e = beam_to_instrument(B)
+    err = case.pings.bt_radial_m_s @ e
+    err = err[np.isfinite(err)]
+    if err.size < 5:
+        return 0.01
+    mad = 1.4826 * np.median(np.abs(err - np.median(err)))
+    return float(max(mad / np.linalg.norm(e), 1e-4))
+
+
+class CalibrationProblem:
+    """The joint NLP of one case: built once, solved from many starts."""
+
+    def __init__(self, case: Case, config: CalibrationConfig, fit: AttitudeFit | None = None):
+        self.case, self.config = case, config
+        self.two_stage = config.method == "two-stage"
+        self.fit = fit or fit_attitude(case, max_modes=config.max_modes, fixed_modes=1 if self.two_stage else config.modes)
+        self.timing = choose_timing(case, self.fit, config.timing)
+        self.frame = case.attitude.frame
+        self.head_sensor = self.frame == "transducer"
+        layout = self.fit.params.layout
+        self.layout = layout
+        att_fun = attitude_function(layout)
+        self.attitude_fun = att_fun
+        pings, N = case.pings, case.pings.n
+        self.beam_dirs_t = case.instrument.beam_directions()
+        self.pos_t = case.instrument.transducer_positions()
+        v = case.vessel
+        self.lever_box = config.lever_box_m or (0.5 * v.length_m if v.length_m else 10.0)
+
+        # ---- decision variables, unscaled, with names, scales and bounds
+        blocks, names, scale, lb, ub = [], [], [], [], []
+
+        def add(sym, block_names, block_scale, lo, hi):
+            blocks.append(sym)
+            names.extend(block_names)
+            scale.extend(block_scale)
+            lb.extend(lo)
+            ub.extend(hi)
+
+        if self.two_stage:  # stage 1 is done: the attitude model is frozen
+            p_att = ca.MX(ca.DM(self.fit.params.pack()))
+        else:
+            p_att = ca.MX.sym("attitude", layout.size)
+            att_names, att_scale, att_lo, att_hi = self._attitude_bounds(self.fit.params)
+            add(p_att, att_names, att_scale, att_lo, att_hi)
+        self.fixed_installation = self.head_sensor or self.two_stage
+        if self.head_sensor:
+            ypr_st = ca.MX(ca.DM.zeros(3))
+        elif self.two_stage:
+            ypr_st = ca.MX(ca.DM(np.asarray(config.nominal_installation_ypr_rad, dtype=float)))
+        else:
+            ypr_st = ca.MX.sym("installation", 3)
+            b = config.installation_bound_rad
+            add(ypr_st, list(ANGLE_NAMES), [0.02] * 3, [-b] * 3, [b] * 3)
+        Lst = euler_matrix(ypr_st[0], ypr_st[1], ypr_st[2])
+        self.lever = lever_block(config.formulation, Lst, self.pos_t, config.epsilon_rel)
+        nl = len(self.lever.names)
+        add(self.lever.x, self.lever.names, [self.lever_box / 5] * nl, [-self.lever_box] * nl, [self.lever_box] * nl)
+
+        # ---- navigation velocity of G
+        ref = case.reference
+        self.stationary = ref is not None and ref.stationary
+        t0, t1 = pings.time_s[0], pings.time_s[-1]
+        if ref is not None and ref.time_s is not None:
+            t0, t1 = min(t0, ref.time_s[0]), max(t1, ref.time_s[-1])
+        self.knots = None
+        if not self.stationary:
+            interval = config.velocity_knot_interval_s or self._default_knot_interval()
+            n_knots = max(2, int(np.ceil((t1 - t0) / interval)) + 1)
+            self.knots = np.linspace(t0, t1, n_knots)
+            vk = ca.MX.sym("velocity", 3 * n_knots)
+            speed = max(self._speed_guess(), 0.05)
+            add(vk, [f"V{k}_{a}" for k in range(n_knots) for a in AXES], [speed] * (3 * n_knots),
+                [-20.0] * (3 * n_knots), [20.0] * (3 * n_knots))
+            V = ca.reshape(vk, 3, n_knots).T  # (K, 3)
+            v_ping = ca.mtimes(ca.DM(_hat_basis(pings.time_s, self.knots)), V)
+        else:
+            V = None
+            v_ping = ca.MX(ca.DM.zeros(N, 3))
+
+        x = ca.vertcat(*blocks)
+        self.names = names
+        self.scale = np.array(scale, dtype=float)
+        self.lbx, self.ubx = np.array(lb, dtype=float), np.array(ub, dtype=float)
+        z = ca.MX.sym("z", x.shape[0])
+        # ---- residual channels (weights in p so noise can be re-estimated without rebuilding)
+        self.channels: list[tuple[str, int]] = []
+        models, meas = [], []
+        # attitude samples (stage 1 of the two-stage method has used them already)
+        a = case.attitude
+        M = a.time_s.size
+        if not self.two_stage:
+            ypr_model, *_ = att_fun.map(M)(ca.DM(a.time_s).T, p_att)
+            ypr_meas = a.ypr()
+            dpsi = ypr_meas[:, 0] - ca.transpose(ypr_model[0, :])
+            models += [ca.atan2(ca.sin(dpsi), ca.cos(dpsi)), ca.transpose(ypr_model[1, :]) - ypr_meas[:, 1],
+                       ca.transpose(ypr_model[2, :]) - ypr_meas[:, 2]]
+            self.channels += [("heading", M), ("pitch", M), ("roll", M)]
+        # bottom track and ranges
+        bt_fun = bottom_track_function(att_fun, self.timing, config.tangential).map(N)
+        depth = case.environment.depth_at_pings(N)
+        g_depth = case.environment.transducer_depth_m - ca.sum1(self.lever.r[:, 2]) / 4
+        radial, rng = bt_fun(ca.DM(pings.time_s).T, ca.DM(depth).T, g_depth, case.instrument.sound_speed_m_s,
+                             v_ping.T, p_att, self.lever.r, ypr_st, ca.DM(self.beam_dirs_t))
+        bt = pings.bt_radial_m_s
+        self.bt_mask = np.isfinite(bt)
+        for i in range(4):
+            models.append(ca.transpose(radial[i, :]) - np.nan_to_num(bt[:, i]))
+            self.channels.append((f"bt_beam{i + 1}", N))
+        self.use_ranges = config.use_ranges and pings.bt_range_m is not None
+        if self.use_ranges:
+            for i in range(4):
+                models.append(ca.transpose(rng[i, :]) - np.nan_to_num(pings.bt_range_m[:, i]))
+                self.channels.append((f"range_beam{i + 1}", N))
+        # reference velocity of a body point
+        self.use_reference = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
+        if self.use_reference:
+            L = ref.time_s.size
+            _, _, dLam, _, _ = att_fun.map(L)(ca.DM(ref.time_s).T, p_att)
+            p_ref = np.asarray(ref.point_body_m, dtype=float)
+            if self.head_sensor:  # dLambda p = dLambda_h Lambda_tb^T p with the nominal Lambda_tb
+                p_ref = np.asarray(euler_matrix(*config.nominal_installation_ypr_rad)).T @ p_ref
+            v_ref_model = ca.mtimes(ca.DM(_hat_basis(ref.time_s, self.knots)), V) if V is not None else ca.MX(L, 3)
+            for j in range(3):
+                tang = ca.mtimes(ca.reshape(dLam[j, :], 3, L).T, ca.DM(p_ref))
+                models.append(v_ref_model[:, j] + tang - np.nan_to_num(ref.velocity_m_s[:, j]))
+                self.channels.append((f"reference_{AXES[j]}", L))
+        raw = ca.vertcat(*models)
+        self.masks = self._masks()
+        weights = ca.MX.sym("w", raw.shape[0])
+        e = weights * raw
+        self.sigma = self._initial_sigmas()
+        subs = [x], [self.scale * z]
+        e_z = ca.substitute([e], *subs)[0]
+        raw_z = ca.substitute([raw], *subs)[0]
+        g_z = ca.substitute([self.lever.g], *subs)[0]
+        r_z = ca.substitute([self.lever.r], *subs)[0]
+        st_z = ca.substitute([ypr_st], *subs)[0]
+        mx_nlp = {"x": z, "p": weights, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
+        if config.solver.expand:
+            self.nlp, e_z, ex = expand_problem(mx_nlp, e_z, {"raw": raw_z, "r": ca.vec(r_z.T), "st": st_z})
+            z, weights, g_z = self.nlp["x"], self.nlp["p"], self.nlp["g"]
+            raw_z, r_vec, st_z = ex["raw"], ex["r"], ex["st"]
+        else:
+            self.nlp, r_vec = mx_nlp, ca.vec(r_z.T)
+        self.jacobian_fun = ca.Function("residual_jacobian", [z, weights], [ca.jacobian(e_z, z)])
+        self.residual_fun = ca.Function("residuals", [z, weights], [e_z, raw_z])
+        self.derived_fun = ca.Function("derived", [z], [r_vec, st_z, ca.jacobian(r_vec, z),
+                                                      ca.jacobian(st_z, z), g_z, ca.jacobian(g_z, z)])
+        self.residuals = e_z
+        self.lbg, self.ubg = self.lever.lbg, self.lever.ubg
+        self.solver = build_solver(self.nlp, config.solver, "calibration", residuals=self.jacobian_fun)
+
+    # ------------------------------------------------------------------ helpers
+    def _attitude_bounds(self, params: AttitudeParams):
+        lay = params.layout
+        names, scale, lo, hi = [], [], [], []
+        for axis, modes, bias in (("roll", params.roll_modes, params.roll_bias), ("pitch", params.pitch_modes, params.pitch_bias)):
+            for k, (c, s, w, v) in enumerate(modes):
+                names += [f"{axis}{k + 1}_cos", f"{axis}{k + 1}_sin", f"{axis}{k + 1}_omega", f"{axis}{k + 1}_decay"]
+                amp = max(np.hypot(c, s), 1e-3)
+                scale += [amp, amp, w * 0.01, 0.05]
+                lo += [-np.inf, -np.inf, 0.8 * w, 0.0]
+                hi += [np.inf, np.inf, 1.25 * w, 3.0]
+            names.append(f"{axis}_bias")
+            scale.append(0.01)
+            lo.append(-np.pi / 2)
+            hi.append(np.pi / 2)
+        for k in range(lay.yaw_trend_order + 1):
+            names.append(f"yaw_trend{k}")
+            scale.append(1.0 if k == 0 else 0.01 ** k)
+            lo.append(-np.inf)
+            hi.append(np.inf)
+        for k in range(lay.n_roll + lay.n_pitch):
+            names.append(f"yaw_coupling{k + 1}")
+            scale.append(0.1)
+            lo.append(-10.0)
+            hi.append(10.0)
+        # reorder to the layout's block order (roll modes, roll bias, pitch modes, pitch bias, ...)
+        return names, scale, lo, hi
+
+    def _default_knot_interval(self) -> float:
+        ref = self.case.reference
+        duration = self.case.pings.time_s[-1] - self.case.pings.time_s[0]
+        if ref is not None and ref.time_s is not None and ref.time_s.size > 1:
+            return max(5 * float(np.median(np.diff(ref.time_s))), duration / 50)
+        return max(5 * float(np.median(np.diff(self.case.pings.time_s))), duration / 30)
+
+    def _speed_guess(self) -> float:
+        ref = self.case.reference
+        if ref is not None and ref.velocity_m_s is not None:
+            return float(np.nanmedian(np.linalg.norm(ref.velocity_m_s, axis=1)))
+        return 0.1
+
+    def _masks(self) -> np.ndarray:
+        parts = [] if self.two_stage else [np.ones(self.case.attitude.time_s.size)] * 3
+        parts += [self.bt_mask[:, i].astype(float) for i in range(4)]
+        if self.use_ranges:
+            parts += [np.isfinite(self.case.pings.bt_range_m[:, i]).astype(float) for i in range(4)]
+        if self.use_reference:
+            parts += [np.all(np.isfinite(self.case.reference.velocity_m_s), axis=1).astype(float)] * 3
+        return np.concatenate(parts)
+
+    def _initial_sigmas(self) -> dict:
+        s = {"bt": bt_noise_from_error_velocity(self.case)}
+        if not self.two_stage:
+            s.update(heading=max(self.fit.heading_sigma, 1e-4), pitch=max(self.fit.pitch.sigma, 1e-4),
+                     roll=max(self.fit.roll.sigma, 1e-4))
+        if self.use_ranges:
+            s["range"] = 0.02
+        if self.use_reference:
+            s["reference"] = 0.02
+        return s
+
+    def channel_sigma_key(self, channel: str) -> str:
+        return channel.split("_")[0]
+
+    def weights(self, sigma: dict | None = None) -> np.ndarray:
+        sigma = sigma or self.sigma
+        w = np.concatenate([np.full(n, 1.0 / sigma[self.channel_sigma_key(ch)]) for ch, n in self.channels])
+        return w * self.masks
+
+    def channel_slices(self) -> dict:
+        out, k = {}, 0
+        for ch, n in self.channels:
+            out[ch] = slice(k, k + n)
+            k += n
+        return out
+
+    # ------------------------------------------------------------------ starts
+    def start_points(self, n_starts: int, seed: int) -> np.ndarray:
+        """Pre-fit start, empirical-guess start, then a Latin hypercube over the start region."""
+        rng = np.random.default_rng(seed)
+        base = self._x_from(self.fit.params, np.zeros(3), self._centre_guess())
+        starts = [base]
+        emp = self._empirical_params()
+        if emp is not None and n_starts > 1:
+            starts.append(self._x_from(emp, np.zeros(3), self._centre_guess()))
+        n_design = n_starts - len(starts)
+        if n_design > 0:
+            dims = 3 + 3 + 2  # centre P, angles, frequency and decay jitter
+            u = qmc.LatinHypercube(d=dims, seed=rng).random(n_design) * 2 - 1
+            for row in u:
+                centre = row[:3] * self.lever_box
+                angles = np.zeros(3) if self.fixed_installation else row[3:6] * self.config.installation_bound_rad
+                starts.append(self._x_from(self._jitter(self.fit.params, row[6], row[7]), angles, centre))
+        x0 = np.array(starts)
+        x0 = np.clip(x0, self.lbx, self.ubx)
+        return x0 / self.scale
+
+    def _centre_guess(self) -> np.ndarray:
+        return np.array([0.0, 0.0, 0.1 * self.lever_box])
+
+    def _jitter(self, params: AttitudeParams, u_omega: float, u_decay: float) -> AttitudeParams:
+        def j(modes):
+            m = modes.copy()
+            if m.size:
+                m[:, 2] *= 1 + 0.01 * u_omega
+                m[:, 3] = np.clip(m[:, 3] * (1 + 0.5 * u_decay), 0.0, 3.0)
+            return m
+
+        return AttitudeParams(j(params.roll_modes), params.roll_bias, j(params.pitch_modes), params.pitch_bias,
+                              params.yaw_trend, params.yaw_coupling, params.t_ref_s)
+
+    def _empirical_params(self) -> AttitudeParams | None:
+        from ..models.empirical import motion_guess
+
+        v = self.case.vessel
+        if not (v.length_m and v.beam_m and v.height_m and v.mass_kg) or self.fit.roll.modes.size == 0:
+            return None
+        g = motion_guess(v.length_m, v.beam_m, v.height_m, v.mass_kg, v.draft_m, v.displaced_volume_m3)
+        p = self.fit.params
+        roll, pitch = p.roll_modes.copy(), p.pitch_modes.copy()
+        roll[0, 2:] = [g.roll_damped_rad_s, g.roll_decay_1_s]
+        if pitch.size:
+            pitch[0, 2:] = [g.roll_damped_rad_s if self.head_sensor else g.pitch_damped_rad_s,
+                            g.roll_decay_1_s if self.head_sensor else g.pitch_decay_1_s]
+        return AttitudeParams(roll, p.roll_bias, pitch, p.pitch_bias, p.yaw_trend, p.yaw_coupling, p.t_ref_s)
+
+    def _x_from(self, params: AttitudeParams, angles, centre) -> np.ndarray:
+        parts = [] if self.two_stage else [params.pack()]
+        if not self.fixed_installation:
+            parts.append(np.asarray(angles, dtype=float))
+        elif self.two_stage and not self.head_sensor:
+            angles = np.asarray(self.config.nominal_installation_ypr_rad, dtype=float)
+        Lst = np.asarray(euler_matrix(*angles)) if not self.head_sensor else np.eye(3)
+        parts.append(self.lever.initial(centre, Lst, self.pos_t))
+        if self.knots is not None:
+            parts.append(self._velocity_guess().reshape(-1))
+        return np.concatenate(parts)
+
+    def _velocity_guess(self) -> np.ndarray:
+        ref = self.case.reference
+        if ref is not None and ref.velocity_m_s is not None:
+            v = ref.velocity_m_s
+            ok = np.all(np.isfinite(v), axis=1)
+            half = np.median(np.diff(self.knots)) / 2
+            out = []
+            for tk in self.knots:
+                sel = ok & (np.abs(ref.time_s - tk) <= half)
+                out.append(np.mean(v[sel], axis=0) if sel.any() else np.array([np.interp(tk, ref.time_s[ok], v[ok, j]) for j in range(3)]))
+            return np.array(out)
+        from .asc import asc
+
+        corr = asc(self.case)
+        v = corr.vessel_velocity_m_s
+        ok = np.all(np.isfinite(v), axis=1)
+        return np.column_stack([np.interp(self.knots, corr.time_s[ok], v[ok, j]) for j in range(3)])
+
+    # ------------------------------------------------------------------ solve
+    def solve(self) -> CalibrationResult:
+        cfg = self.config
+        x0s = self.start_points(cfg.n_starts, cfg.seed)
+        lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
+        ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights())
+        if cfg.estimate_noise:
+            self.sigma = self._reestimate_sigmas(ms.x)
+            refit = multistart(self.solver, ms.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)
+            # the per-start table stays that of the multistart; the final solve is the refit
+            ms = MultistartResult(**{**ms.__dict__, "x": refit.x, "objective": refit.objective, "success": refit.success,
+                                     "status": refit.status, "iterations": refit.iterations, "lam_g": refit.lam_g,
+                                     "g": refit.g, "message": ms.message + f"; noise re-estimated, refit: {refit.status}"})
+        return self._result(ms)
+
+    def _reestimate_sigmas(self, z) -> dict:
+        _, raw = self.residual_fun(z, self.weights())
+        raw = np.asarray(raw).ravel()
+        sl = self.channel_slices()
+        n_total = float(self.masks.sum())
+        dof = max(1.0 - len(z) / max(n_total, 1.0), 0.1)
+        out = dict(self.sigma)
+        for key in out:
+            idx = np.concatenate([np.arange(s.start, s.stop) for ch, s in sl.items() if self.channel_sigma_key(ch) == key])
+            m = self.masks[idx] > 0
+            if m.sum() > 3:
+                out[key] = float(max(np.sqrt(np.sum(raw[idx][m] ** 2) / (m.sum() * dof)), 1e-6))
+        return out
+
+    def _result(self, ms: MultistartResult) -> CalibrationResult:
+        w = self.weights()
+        e = np.asarray(self.residual_fun(ms.x, w)[0]).ravel()
+        J = np.asarray(self.jacobian_fun(ms.x, w))
+        r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
+        eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
+        Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))  # noqa: E501
+        unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale,
+                          {"beam_dirs_sensor": self.beam_dirs_t @ Lst.T})
+        se_x = unc.se_z * self.scale
+        cov_z = unc.cov_z
+        se_r = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Jr, cov_z, Jr), 0)).reshape(4, 3)
+        se_st = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Jst, cov_z, Jst), 0)) if Jst.size else np.zeros(3)
+        r_s = r_flat.reshape(4, 3)
+        se_r[~unc.determined_mask(Jr).reshape(4, 3)] = np.inf
+        sl = self.channel_slices()
+        chi2 = {}
+        for ch, s in sl.items():
+            m = self.masks[s] > 0
+            chi2[ch] = float(np.sum(e[s][m] ** 2) / max(m.sum(), 1))
+        viol = 0.0
+        if len(self.lbg):
+            g = g.ravel()
+            viol = float(np.max(np.concatenate([np.maximum(self.lbg - g, 0), np.maximum(g - self.ubg, 0)])))
+        x = ms.x * self.scale
+        p_att = self.fit.params if self.two_stage else AttitudeParams.unpack(x[: self.layout.size], self.layout)
+        warn = list(unc.warnings)
+        if not ms.success:
+            warn.append(f"solver did not converge: {ms.status}")
+        if self.head_sensor:
+            nominal = np.asarray(self.config.nominal_installation_ypr_rad, dtype=float)
+            Ltb = np.asarray(euler_matrix(*nominal))
+            radius = r_s @ Ltb.T
+            radius_se = np.sqrt((se_r**2) @ (Ltb.T**2))
+            ypr, ypr_se = nominal, np.full(3, np.inf)
+            warn.append("attitude sensor inside the ADCP head: the data fix only the head-frame lever arms "
+                        "(radius_vectors_head_m = Lambda_tb^T r); installation angles are not determined and need "
+                        "another source (nominal mounting, GNSS on a moving run); radius_vectors_m uses the nominal angles")
+        else:
+            radius, radius_se = r_s, se_r
+            ypr, ypr_se = np.asarray(st).ravel(), se_st.ravel()
+            if self.fixed_installation:
+                ypr_se = np.full(3, np.inf)
+                warn.append("two-stage method: installation angles held at their nominal values, not estimated")
+            else:
+                ypr_se[~unc.determined_mask(Jst)] = np.inf
+        for msg in warn:
+            warnings.warn(msg, stacklevel=3)
+        vk = None
+        if self.knots is not None:
+            k = len(self.knots)
+            vk = x[-3 * k:].reshape(k, 3)
+        return CalibrationResult(
+            radius_vectors_m=radius, radius_vectors_se_m=radius_se, installation_ypr_rad=ypr,
+            installation_ypr_se_rad=ypr_se, installation_determined=not self.head_sensor and bool(np.all(np.isfinite(ypr_se))),
+            attitude=p_att, attitude_frame=self.frame, lever_arms_sensor_m=r_s, lever_arms_sensor_se_m=se_r,
+            objective=float(ms.objective), max_constraint_violation=viol, formulation=self.config.formulation,
+            timing=self.timing, noise_sigma=dict(self.sigma), chi2_per_channel=chi2, multistart=ms, uncertainty=unc,
+            x_names=list(self.names), x=x, x_se=se_x, config=self.config,
+            velocity_knots_s=self.knots, velocity_knots_m_s=vk, warnings=warn,
+        )
+
+def calibrate(case: Case, config: CalibrationConfig | None = None) -> CalibrationResult:
+    """Joint calibration of one case (see module docstring)."""
+    return CalibrationProblem(case, config or CalibrationConfig()).solve()

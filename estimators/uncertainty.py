@@ -1,0 +1,116 @@
+"""Standard errors and identifiability from the Gauss-Newton reduced information matrix.
+
+With J the Jacobian of the noise-weighted residuals and A that of the equality
+constraints (both in scaled variables z), the information in the feasible tangent
+space is F = Z^T J^T J Z with Z spanning null(A). Directions where F is
+(numerically) singular, or where the standard error exceeds ``UNDETERMINED_SE``
+times the variable's scale, are reported as unobservable, in words and as vectors;
+quantities that depend on them get an infinite standard error instead of a number.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import null_space
+
+RANK_RTOL = 1e-10
+UNDETERMINED_SE = 1e3  # in units of the variable scales
+WEAK_SE = 0.1  # a direction known no better than a tenth of its scale is "weakly determined"
+LEAK_RTOL = 0.01  # a quantity depends on an undetermined direction when its gradient leaks >1% into it
+AXIS_WORDS = {0: "x_s (bow / roll axis)", 1: "y_s (starboard / pitch axis)", 2: "z_s (down / yaw axis)"}
+
+
+@dataclass
+class Uncertainty:
+    cov_z: np.ndarray
+    se_z: np.ndarray
+    eigenvalues: np.ndarray
+    null_directions_z: np.ndarray  # (k, n) unit directions the data do not fix
+    unobservable: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+
+    def determined_mask(self, Jd: np.ndarray) -> np.ndarray:
+        """For each derived quantity (row of its Jacobian in z): does the data fix it?"""
+        Jd = np.atleast_2d(Jd)
+        if self.null_directions_z.size == 0:
+            return np.ones(Jd.shape[0], dtype=bool)
+        leak = np.abs(Jd @ self.null_directions_z.T).max(axis=1)
+        return leak <= LEAK_RTOL * (np.linalg.norm(Jd, axis=1) + 1e-300)
+
+
+def _describe(vec_x: np.ndarray, names: list, context: dict) -> str:
+    """Words for one unobservable direction (given in unscaled variables, unit norm)."""
+    v = vec_x / np.linalg.norm(vec_x)
+    big = np.argsort(np.abs(v))[::-1]
+    terms = [f"{v[i]:+.2f} {names[i]}" for i in big[:4] if abs(v[i]) > 0.05]
+    text = " ".join(terms)
+    idx = {n: i for i, n in enumerate(names)}
+    lever = np.array([idx[n] for n in names if n.startswith("r") and n[1:2].isdigit()])
+    weight_lever = np.sum(v[lever] ** 2) if lever.size else 0.0
+    if lever.size == 12 and weight_lever > 0.95:
+        r = v[lever].reshape(4, 3)
+        norms = np.linalg.norm(r, axis=1)
+        beams = context.get("beam_dirs_sensor")
+        if beams is not None:
+            along = np.sum(r * beams, axis=1)  # each transducer's move along its own beam
+            if np.sum((r - along[:, None] * beams) ** 2) < 0.05 * weight_lever:
+                who = [str(k + 1) for k in np.flatnonzero(np.abs(along) > 0.2 * np.abs(along).max())]
+                if len(who) == 4 and np.all(np.sign(along) == np.sign(along[0])):
+                    return f"all four transducers sliding along their own beams together ('breathing') ({text})"
+                return f"transducer(s) {', '.join(who)} sliding along their own beams ({text})"
+        mean = r.mean(axis=0)
+        if np.linalg.norm(mean) * 2 > 0.95 and np.allclose(r, mean, atol=0.1):
+            axis = int(np.argmax(np.abs(mean)))
+            return f"the whole head shifted along {AXIS_WORDS[axis]} ({text})"
+    p_idx = [idx[n] for n in ("P_x", "P_y", "P_z") if n in idx]
+    if p_idx and np.sum(v[p_idx] ** 2) > 0.95:
+        axis = int(np.argmax(np.abs(v[p_idx])))
+        return f"the head centre P along {AXIS_WORDS[axis]} ({text})"
+    if any(n.startswith("installation") for n in (names[i] for i in big[:1])):
+        return f"installation angle {names[big[0]].split('_')[1]} ({text})"
+    if all(names[i].startswith(("roll", "pitch", "yaw")) for i in big[:2]):
+        return f"attitude-model parameters ({text})"
+    return text
+
+
+def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndarray, context: dict | None = None) -> Uncertainty:
+    """Covariance of the scaled variables and the unobservable directions.
+
+    Parameters
+    ----------
+    J : (m, n) Jacobian of the noise-weighted residuals w.r.t. the scaled variables z.
+    A : (q, n) Jacobian of the equality constraints, or None.
+    names : variable names; scale : (n,) variable scales (x = scale * z).
+    """
+    n = J.shape[1]
+    Z = null_space(A) if A is not None and A.size else np.eye(n)
+    F = Z.T @ (J.T @ J) @ Z
+    lam, V = np.linalg.eigh(F)
+    lam_max = max(lam.max(initial=0.0), 1e-300)
+    bad = (lam <= RANK_RTOL * lam_max) | (lam <= 1.0 / UNDETERMINED_SE**2)
+    good = ~bad
+    cov_z = (Z @ V[:, good]) @ np.diag(1.0 / lam[good]) @ (Z @ V[:, good]).T
+    null_z = (Z @ V[:, bad]).T
+    se = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
+    if null_z.size:
+        leak = np.abs(null_z).max(axis=0) > LEAK_RTOL
+        se[leak] = np.inf
+    unobs, warns = [], []
+    context = context or {}
+    weak = good & (lam < 1.0 / WEAK_SE**2)
+    for kind, dirs, se_dir in (("unobservable", null_z, np.full(len(null_z), np.inf)),
+                               ("weak", (Z @ V[:, weak]).T, 1.0 / np.sqrt(lam[weak]))):
+        for d, s_d in zip(dirs, se_dir):
+            vec_x = d * scale
+            unit = vec_x / np.linalg.norm(vec_x)
+            unobs.append({"kind": kind, "description": _describe(vec_x, names, context),
+                          "se_along": float(s_d * np.linalg.norm(vec_x)) if np.isfinite(s_d) else None,
+                          "vector": {names[i]: float(unit[i]) for i in np.flatnonzero(np.abs(unit) > 1e-3)}})
+    for kind, label in (("unobservable", "not determined by the data"), ("weak", "only weakly determined")):
+        items = [u["description"] for u in unobs if u["kind"] == kind]
+        if items:
+            warns.append(f"{len(items)} direction(s) of the unknowns {label}: " + "; ".join(items[:6])
+                         + ("; ..." if len(items) > 6 else ""))
+    return Uncertainty(cov_z, se, lam, null_z, unobs, warns)

@@ -1,0 +1,227 @@
+"""IPOPT multistart: one solver built per problem shape, many starting points.
+
+The NLP is a CasADi dict ``{'x', 'p', 'f', 'g'}``; the solver is created once and
+called from every start. Local solutions are grouped by objective and position; the
+result says which start reached the best, how many did, and every start's record.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from .gauss_newton import GaussNewtonHessian
+
+_KEEP_ALIVE: list = []
+AUTO_GN_SIZE = 200_000  # nonzeros of the residual Jacobian's bounding box
+HESSIANS = ("auto", "gauss-newton", "exact", "limited-memory")
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """IPOPT settings.
+
+    Parameters
+    ----------
+    max_iter : int
+    tol : float
+        IPOPT's convergence tolerance.
+    hessian : str
+        ``auto`` (exact for small least-squares problems, where it converges in far
+        fewer iterations; Gauss-Newton above ``AUTO_GN_SIZE`` residuals x unknowns),
+        ``gauss-newton`` (J^T J of the weighted residuals), ``exact`` or
+        ``limited-memory`` (quasi-Newton).
+    linear_solver : str
+        IPOPT linear solver available in this CasADi build (``mumps`` ships with it).
+    scaling : bool
+        IPOPT's gradient-based NLP scaling.
+    expand : bool
+        Expand MX graphs to SX before solving (faster for small and medium problems).
+    print_level : int
+    """
+
+    max_iter: int = 500
+    tol: float = 1e-9
+    hessian: str = "auto"
+    linear_solver: str = "mumps"
+    scaling: bool = True
+    expand: bool = True
+    print_level: int = 0
+
+    def __post_init__(self):
+        if self.hessian not in HESSIANS:
+            raise ValueError(f"SolverOptions.hessian: expected one of {list(HESSIANS)}, got {self.hessian!r}")
+
+    def ipopt(self) -> dict:
+        return {
+            "expand": self.expand,
+            "print_time": False,
+            "ipopt.print_level": self.print_level,
+            "ipopt.sb": "yes",
+            "ipopt.max_iter": self.max_iter,
+            "ipopt.tol": self.tol,
+            "ipopt.acceptable_tol": 1e3 * self.tol,
+            "ipopt.hessian_approximation": "limited-memory" if self.hessian == "limited-memory" else "exact",
+            "ipopt.linear_solver": self.linear_solver,
+            "ipopt.nlp_scaling_method": "gradient-based" if self.scaling else "none",
+        }
+
+
+@dataclass(frozen=True)
+class StartRecord:
+    index: int
+    objective: float
+    iterations: int
+    time_s: float
+    status: str
+    success: bool
+    group: int = -1
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class MultistartResult:
+    """Best local solution of a multistart, like scipy's OptimizeResult.
+
+    ``success`` is the best start's solver success; ``fraction_at_best`` is the share of
+    starts that reached the best objective (within ``objective_rtol``).
+    """
+
+    x: np.ndarray
+    objective: float
+    success: bool
+    status: str
+    message: str
+    iterations: int
+    time_s: float
+    lam_g: np.ndarray
+    g: np.ndarray
+    starts: list = field(default_factory=list)
+    n_groups: int = 0
+    fraction_at_best: float = 0.0
+    best_start: int = 0
+
+
+def _progress(iterable, total, enabled):
+    if not enabled:
+        return iterable
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a declared dependency
+        return iterable
+    return tqdm(iterable, total=total, desc="multistart", unit="start", leave=False)
+
+
+def expand_problem(nlp: dict, residuals: ca.MX, extra: dict | None = None):
+    """MX problem -> SX problem (and SX versions of ``extra`` expressions of x and p)."""
+    x, p = nlp["x"], nlp.get("p", ca.MX.sym("p", 0))
+    extra = extra or {}
+    names = ["f", "g", "residuals"] + list(extra)
+    fun = ca.Function("problem", [x, p], [nlp["f"], nlp["g"], residuals] + list(extra.values())).expand()
+    xs, ps = ca.SX.sym("x", x.sparsity()), ca.SX.sym("p", p.sparsity())
+    out = dict(zip(names, fun(xs, ps)))
+    sx_nlp = {"x": xs, "p": ps, "f": out["f"], "g": out["g"]}
+    return sx_nlp, out["residuals"], {k: out[k] for k in extra}
+
+
+def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals=None) -> ca.Function:
+    """The IPOPT solver Function for an NLP dict.
+
+    For ``hessian="gauss-newton"`` pass ``residuals``: the vector e with f = 0.5 |e|^2,
+    or directly the Function (x, p) -> de/dx. The Lagrangian Hessian is then
+    sigma J^T J (constraint curvature left out, as in CasADi's ``sysid.py`` example),
+    formed numerically by :class:`~adcpdyn.solvers.gauss_newton.GaussNewtonHessian`.
+    """
+    opts = options.ipopt()
+    hessian = options.hessian
+    if hessian == "auto":
+        size = residuals.size1_out(0) * residuals.size2_out(0) if isinstance(residuals, ca.Function) else 0
+        hessian = "gauss-newton" if residuals is not None and size > AUTO_GN_SIZE else "exact"
+    if hessian == "gauss-newton":
+        if residuals is None:
+            raise ValueError("residuals: required for hessian='gauss-newton' (f must be 0.5 |residuals|^2)")
+        x, p = nlp["x"], nlp.get("p", ca.MX.sym("p", 0))
+        jac = residuals if isinstance(residuals, ca.Function) else ca.Function("residual_jacobian", [x, p], [ca.jacobian(residuals, x)])
+        hess = GaussNewtonHessian(jac, nlp["g"].shape[0])
+        opts["hess_lag"] = hess
+        _KEEP_ALIVE.append(hess)  # the callback must outlive the solver
+    return ca.nlpsol(name, "ipopt", nlp, opts)
+
+
+def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: float = 1e-6,
+               x_scale=None, progress: bool | None = None) -> MultistartResult:
+    """Solve from every row of ``x0s``; return the best with per-start records.
+
+    Parameters
+    ----------
+    solver : casadi.Function
+        From :func:`build_solver`.
+    x0s : (S, n) array
+        Starting points.
+    lbx, ubx, lbg, ubg, p : arrays
+        Bounds and parameter values passed to every call.
+    objective_rtol : float
+        Starts whose objectives agree to this relative tolerance share a group.
+    x_scale : (n,) array, optional
+        Typical magnitudes of x, to compare solutions position-wise when grouping.
+    progress : bool, optional
+        Show a progress bar (default: when stderr is a terminal).
+    """
+    x0s = np.atleast_2d(np.asarray(x0s, dtype=float))
+    if progress is None:
+        progress = sys.stderr.isatty()
+    sols = []
+    records = []
+    for i in _progress(range(x0s.shape[0]), x0s.shape[0], progress):
+        tic = time.perf_counter()
+        sol = solver(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p)
+        elapsed = time.perf_counter() - tic
+        stats = solver.stats()
+        f = float(sol["f"])
+        records.append(
+            dict(index=i, objective=f if np.isfinite(f) else np.inf, iterations=int(stats.get("iter_count", -1)),
+                 time_s=elapsed, status=str(stats.get("return_status", "unknown")), success=bool(stats.get("success", False)))
+        )
+        sols.append((np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["g"]).ravel(), stats))
+
+    objectives = np.array([r["objective"] for r in records])
+    ok = np.array([r["success"] for r in records])
+    # Prefer successful starts; a failed start only wins if nothing converged.
+    order = np.lexsort((objectives, ~ok))
+    best = int(order[0])
+    scale = np.ones(x0s.shape[1]) if x_scale is None else np.asarray(x_scale, dtype=float)
+    groups: list[tuple[float, np.ndarray]] = []
+    for i in order:
+        f, x = objectives[i], sols[i][0] / scale
+        for gi, (gf, gx) in enumerate(groups):
+            if abs(f - gf) <= objective_rtol * max(1.0, abs(gf)) and np.max(np.abs(x - gx)) < 1e-2:
+                records[i]["group"] = gi
+                break
+        else:
+            records[i]["group"] = len(groups)
+            groups.append((f, x))
+    f_best = objectives[best]
+    at_best = np.abs(objectives - f_best) <= objective_rtol * max(1.0, abs(f_best))
+    x, lam_g, g, stats = sols[best]
+    return MultistartResult(
+        x=x,
+        objective=float(f_best),
+        success=bool(records[best]["success"]),
+        status=records[best]["status"],
+        message=f"best of {len(records)} starts: {records[best]['status']}; "
+                f"{int(at_best.sum())} reached it, {len(groups)} distinct local solutions",
+        iterations=records[best]["iterations"],
+        time_s=float(sum(r["time_s"] for r in records)),
+        lam_g=lam_g,
+        g=g,
+        starts=[StartRecord(**r) for r in records],
+        n_groups=len(groups),
+        fraction_at_best=float(at_best.mean()),
+        best_start=best,
+    )
