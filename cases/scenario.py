@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..models.motion import AttitudeParams, paper_to_cs
+from ..models.motion import AttitudeParams
 from ..models.navigation import Navigation
 from ..models.sensors import ATTITUDE_FRAMES
 from .case import Vessel
@@ -194,23 +194,9 @@ def _motion(d: dict, owner: str) -> AttitudeParams:
     unknown = sorted(set(d) - allowed)
     if unknown:
         raise ValueError(f"{owner}: unknown key(s) {unknown}; expected some of {sorted(allowed)}")
-    t_ref = float(d.get("t_ref_s", 0.0))
-
-    def modes(key):  # TOML rows are the paper's [amplitude_rad, t0_s, omega_rad_s, decay_1_s]
-        rows = np.array(d.get(key, []), dtype=float).reshape(-1, 4)
-        return np.array([[*paper_to_cs(a, t0, w, v, t_ref), w, v] for a, t0, w, v in rows]).reshape(-1, 4)
-
-    roll, pitch = modes("roll_modes"), modes("pitch_modes")
-    coupling = d.get("yaw_coupling", [0.0] * (len(roll) + len(pitch)))
-    return AttitudeParams(
-        roll_modes=roll,
-        roll_bias=float(d.get("roll_bias_rad", 0.0)),
-        pitch_modes=pitch,
-        pitch_bias=float(d.get("pitch_bias_rad", 0.0)),
-        yaw_trend=np.array(d.get("yaw_trend", [0.0]), dtype=float),
-        yaw_coupling=np.array(coupling, dtype=float),
-        t_ref_s=t_ref,
-    )
+    return AttitudeParams.from_axis_modes(
+        d.get("roll_modes", []), d.get("roll_bias_rad", 0.0), d.get("pitch_modes", []), d.get("pitch_bias_rad", 0.0),
+        d.get("yaw_trend", [0.0]), d.get("yaw_coupling"), float(d.get("t_ref_s", 0.0)))
 
 
 def _platform(d: dict, source: str) -> Platform:

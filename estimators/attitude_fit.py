@@ -1,15 +1,14 @@
 """Attitude-only fit of the sensor's angles: the starting point of every calibration.
 
-Roll and pitch (of whatever frame the sensor sits in) are each a bias plus damped
-modes (:mod:`adcpdyn.models.motion`), added greedily: the strongest Lomb-Scargle peak
-of the current residual seeds a new mode (irregular sample times keep the true peak
-above its aliases even below the mean Nyquist rate), (C, S) and the bias follow by
-linear least squares over a small decay grid, then all of the axis' parameters are
-refined by nonlinear least squares; a mode is kept when it lowers the Bayesian
-information criterion by more than ``BIC_MARGIN``. Yaw is then linear in its
-parameters (trend polynomial plus one coupling per roll and pitch mode), its trend
-order chosen by BIC too. The two-stage baseline uses the same per-axis fit with
-the paper's one mode per axis.
+Roll and pitch (of whatever frame the sensor sits in) share damped modes
+(:mod:`adcpdyn.models.motion`), added greedily: the strongest Lomb-Scargle peak of
+the current residuals seeds a new mode (irregular sample times keep the true peak
+above its aliases even below the mean Nyquist rate), each axis' (C, S) and bias
+follow by linear least squares over a small decay grid, then everything is refined
+by nonlinear least squares; a mode is kept when it lowers the Bayesian information
+criterion by more than ``BIC_MARGIN``. Yaw is then linear in its parameters (trend
+polynomial plus (C, S) on every mode), its trend order chosen by BIC too. The
+two-stage baseline fits each axis separately with the paper's one mode.
 """
 
 from __future__ import annotations
@@ -32,170 +31,186 @@ PERIODOGRAM_SAMPLES = 800
 
 
 @dataclass(frozen=True)
-class AxisFit:
-    """One axis: bias, modes (n, 4) as (C, S, omega, decay), noise estimate and BIC trail."""
+class ModeFit:
+    """Shared modes (n, 2) = (omega, decay) and, per axis, bias and (C, S) (n, 2)."""
 
-    bias: float
     modes: np.ndarray
-    sigma: float
-    rss: float
+    biases: np.ndarray  # (A,)
+    cs: np.ndarray  # (A, n, 2)
+    sigmas: np.ndarray  # (A,)
     bic_trail: list = field(default_factory=list)
 
 
 @dataclass(frozen=True)
 class AttitudeFit:
     params: AttitudeParams
-    roll: AxisFit
-    pitch: AxisFit
-    heading_sigma: float
+    sigmas: np.ndarray  # noise (heading, pitch, roll), rad
     yaw_trend_order: int
+    bic_trail: list = field(default_factory=list)
 
     @property
-    def sigmas(self) -> np.ndarray:
-        """Estimated noise (heading, pitch, roll) in rad."""
-        return np.array([self.heading_sigma, self.pitch.sigma, self.roll.sigma])
+    def heading_sigma(self) -> float:
+        return float(self.sigmas[0])
 
 
-def _axis_function(n_modes: int, n_samples: int, t_ref: float) -> ca.Function:
-    """(t (1, n), q) -> (model (1, n), Jacobian (n, 1 + 4 k)) for one axis, per sample mapped."""
+def _series_function(n_modes: int, n_axes: int, n_samples: int, t_ref: float) -> ca.Function:
+    """(t (1, M), q) -> (stacked model (A M,), Jacobian) with q = [omega_k, decay_k]*, then per
+    axis [bias, C_k, S_k]*; per-sample SX mapped over the samples."""
     t = ca.SX.sym("t")
-    q = ca.SX.sym("q", 1 + 4 * n_modes)
-    y = q[0]
-    for k in range(n_modes):
-        y = y + mode_cs(t, q[1 + 4 * k], q[2 + 4 * k], q[3 + 4 * k], q[4 + 4 * k], t_ref)
-    one = ca.Function("axis1", [t, q], [y, ca.jacobian(y, q)])
-    mapped = one.map(n_samples)
+    q = ca.SX.sym("q", 2 * n_modes + n_axes * (1 + 2 * n_modes))
+    ys = []
+    for a in range(n_axes):
+        base = 2 * n_modes + a * (1 + 2 * n_modes)
+        y = q[base]
+        for k in range(n_modes):
+            y = y + mode_cs(t, q[base + 1 + 2 * k], q[base + 2 + 2 * k], q[2 * k], q[2 * k + 1], t_ref)
+        ys.append(y)
+    y = ca.vertcat(*ys)
+    one = ca.Function("series1", [t, q], [y, ca.jacobian(y, q)])
     tt = ca.MX.sym("t", 1, n_samples)
-    qq = ca.MX.sym("q", 1 + 4 * n_modes)
-    yy, jj = mapped(tt, qq)
-    return ca.Function("axis", [tt, qq], [yy.T, jj.T if n_modes >= 0 else jj])
-
-
-def _bic(rss: float, n: int, k: int) -> float:
-    return n * np.log(max(rss, 1e-300) / n) + k * np.log(n)
-
-
-def _linear_cs(t, resid, omega, decay, t_ref):
-    """Best (C, S, bias shift) for a fixed frequency and decay, and the remaining RSS."""
-    tau = t - t_ref
-    e = np.exp(-decay * tau)
-    A = np.column_stack([e * np.cos(omega * tau), e * np.sin(omega * tau), np.ones_like(t)])
-    coef, *_ = np.linalg.lstsq(A, resid, rcond=None)
-    return coef, float(np.sum((resid - A @ coef) ** 2))
+    qq = ca.MX.sym("q", q.shape[0])
+    yy, jj = one.map(n_samples)(tt, qq)  # (A, M) and (A, nq M)
+    J = ca.vertcat(*[ca.reshape(jj[a, :], q.shape[0], n_samples).T for a in range(n_axes)])
+    return ca.Function("series", [tt, qq], [ca.vec(yy.T), J])
 
 
 def periodogram_peak(t, x, lo, hi, n_candidates=5) -> float:
-    """Circular frequency of the highest Lomb-Scargle peak in [lo, hi].
+    """Circular frequency of the highest Lomb-Scargle peak in [lo, hi] (columns of x summed).
 
     A grid at half the peak width (pi / duration) finds the candidate peaks, a fine
     grid around each of the highest few finds the maximum. Long series are thinned to
     ``PERIODOGRAM_SAMPLES`` evenly spread samples: the peak needs SNR, not every sample.
     """
     t = np.asarray(t, dtype=float)
-    x = np.asarray(x, dtype=float) - np.mean(x)
+    x = np.atleast_2d(np.asarray(x, dtype=float).T).T
+    x = x - x.mean(axis=0)
     if t.size > PERIODOGRAM_SAMPLES:
         keep = np.unique(np.linspace(0, t.size - 1, PERIODOGRAM_SAMPLES).astype(int))
         t, x = t[keep], x[keep]
+    power = lambda grid: sum(lombscargle(t, x[:, j], grid) for j in range(x.shape[1]))
     width = 2 * np.pi / (t[-1] - t[0])
     coarse = np.arange(lo, hi, width / 2)
-    power = lombscargle(t, x, coarse)
+    p = power(coarse)
     best_omega, best_power = lo, -np.inf
-    for i in np.argsort(power)[::-1][:n_candidates]:
+    for i in np.argsort(p)[::-1][:n_candidates]:
         fine = np.linspace(max(lo, coarse[i] - width / 2), min(hi, coarse[i] + width / 2), 41)
-        p = lombscargle(t, x, fine)
-        if p.max() > best_power:
-            best_omega, best_power = fine[int(np.argmax(p))], p.max()
+        pf = power(fine)
+        if pf.max() > best_power:
+            best_omega, best_power = fine[int(np.argmax(pf))], pf.max()
     return float(best_omega)
 
 
-def fit_axis(t, y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = None,
-             omega_band=None) -> AxisFit:
-    """Bias plus damped modes for one angle series (radians).
+def _bic(rss: float, n: int, k: int) -> float:
+    return n * np.log(max(rss, 1e-300) / n) + k * np.log(n)
 
-    Parameters
-    ----------
-    t, y : (M,) arrays
-    t_ref : float
-        Reference time of the (C, S) mode form.
-    max_modes : int
-        Upper bound on the number of modes tried.
-    fixed_modes : int, optional
-        Fit exactly this many modes, no information criterion (the paper uses 1).
-    omega_band : (float, float), optional
-        Search band for the damped frequency in rad/s.
+
+def _design(t, modes, t_ref):
+    tau = t - t_ref
+    cols = [np.ones_like(t)]
+    for w, v in modes:
+        e = np.exp(-v * tau)
+        cols += [e * np.cos(w * tau), e * np.sin(w * tau)]
+    return np.column_stack(cols)
+
+
+def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = None, omega_band=None) -> ModeFit:
+    """Shared damped modes of one or more angle series (columns of Y, radians).
+
+    Greedy: the highest summed Lomb-Scargle peak of the residuals seeds a mode; its
+    decay comes from a small grid with every axis' (bias, C, S) by linear least
+    squares; then all frequencies, decays and amplitudes are refined by nonlinear
+    least squares. A mode is kept while BIC drops by more than ``BIC_MARGIN``
+    (``fixed_modes`` skips the criterion).
     """
     t = np.asarray(t, dtype=float)
-    y = np.asarray(y, dtype=float)
-    n = t.size
+    Y = np.atleast_2d(np.asarray(Y, dtype=float).T).T
+    M, A = Y.shape
     duration = t[-1] - t[0]
     lo, hi = omega_band or (max(2 * np.pi * 2 / duration, 0.2), MAX_OMEGA_RAD_S)
-    q = np.array([np.mean(y)])
-    rss = float(np.sum((y - q[0]) ** 2))
-    trail = [{"modes": 0, "bic": _bic(rss, n, 1)}]
+    scale = np.maximum(np.std(Y, axis=0), 1e-6)
+    modes = np.zeros((0, 2))
+    coef = np.linalg.lstsq(_design(t, modes, t_ref), Y, rcond=None)[0]  # (1 + 2n, A)
+    rss = float(np.sum(((Y - _design(t, modes, t_ref) @ coef) / scale) ** 2))
+    trail = [{"modes": 0, "bic": _bic(rss, M * A, A)}]
     target = fixed_modes if fixed_modes is not None else max_modes
     for k in range(1, target + 1):
-        fun = _axis_function(k, n, t_ref)
-        resid = y - np.asarray(_axis_function(k - 1, n, t_ref)(t[None, :], q)[0]).ravel()
+        resid = Y - _design(t, modes, t_ref) @ coef
         if np.ptp(resid) == 0:
             break
-        omega = periodogram_peak(t, resid, lo, hi)
-        best = min((_linear_cs(t, resid, omega, d, t_ref) + (d,) for d in DECAY_GRID_1_S), key=lambda r: r[1])
-        (c, s, shift), _, decay = best
-        q0 = np.concatenate([[q[0] + shift], q[1:], [c, s, omega, decay]])
-        lower = np.concatenate([[-np.inf], np.tile([-np.inf, -np.inf, lo, 0.0], k)])
-        upper = np.concatenate([[np.inf], np.tile([np.inf, np.inf, hi, MAX_DECAY_1_S], k)])
-        q0 = np.clip(q0, lower + 1e-12, upper - 1e-12)
+        omega = periodogram_peak(t, resid / scale, lo, hi)
+        best = None
+        for decay in DECAY_GRID_1_S:
+            trial = np.vstack([modes, [omega, decay]])
+            X = _design(t, trial, t_ref)
+            c = np.linalg.lstsq(X, Y, rcond=None)[0]
+            r = float(np.sum(((Y - X @ c) / scale) ** 2))
+            if best is None or r < best[0]:
+                best = (r, trial, c)
+        _, trial, c = best
+        q0 = np.concatenate([trial.reshape(-1)] + [c[:, a] for a in range(A)])
+        fun = _series_function(k, A, M, t_ref)
+        lower = np.concatenate([np.tile([lo, 0.0], k), np.full(A * (1 + 2 * k), -np.inf)])
+        upper = np.concatenate([np.tile([hi, MAX_DECAY_1_S], k), np.full(A * (1 + 2 * k), np.inf)])
+        w = np.repeat(1.0 / scale, M)
         sol = least_squares(
-            lambda qq: np.asarray(fun(t[None, :], qq)[0]).ravel() - y,
-            q0,
-            jac=lambda qq: np.asarray(fun(t[None, :], qq)[1]).reshape(n, -1),
+            lambda qq: w * (np.asarray(fun(t[None, :], qq)[0]).ravel() - Y.T.reshape(-1)),
+            np.clip(q0, lower, upper),
+            jac=lambda qq: w[:, None] * np.asarray(fun(t[None, :], qq)[1]),
             bounds=(lower, upper),
             x_scale="jac",
         )
         rss_k = float(2 * sol.cost)
-        bic_k = _bic(rss_k, n, 1 + 4 * k)
+        bic_k = _bic(rss_k, M * A, len(q0))
         trail.append({"modes": k, "bic": bic_k})
         if fixed_modes is None and bic_k > trail[-2]["bic"] - BIC_MARGIN:
             trail[-1]["rejected"] = True
             break
-        q, rss = sol.x, rss_k
-    n_modes = (q.size - 1) // 4
-    sigma = float(np.sqrt(rss / max(n - q.size, 1)))
-    return AxisFit(bias=float(q[0]), modes=q[1:].reshape(n_modes, 4), sigma=sigma, rss=rss, bic_trail=trail)
+        modes = sol.x[: 2 * k].reshape(k, 2)
+        coef = sol.x[2 * k:].reshape(A, 1 + 2 * k).T
+        rss = rss_k
+    n = len(modes)
+    resid = Y - _design(t, modes, t_ref) @ coef
+    sigmas = np.sqrt(np.sum(resid**2, axis=0) / max(M - (1 + 2 * n) - 2 * n / A, 1))
+    return ModeFit(modes, coef[0], coef[1:].T.reshape(A, n, 2), sigmas, trail)
 
 
 def fit_attitude(case: Case, max_modes: int = 3, fixed_modes: int | None = None, max_trend_order: int = 2,
-                 t_ref: float | None = None) -> AttitudeFit:
-    """Fit the sensor's roll, pitch and heading samples of a case (see module docstring)."""
+                 t_ref: float | None = None, per_axis: bool = False) -> AttitudeFit:
+    """Fit the sensor's roll, pitch and heading samples of a case (see module docstring).
+
+    ``per_axis=True`` fits roll and pitch separately, each with its own modes (the
+    paper's way, used by the two-stage baseline); otherwise the modes are shared.
+    """
     a = case.attitude
     t = a.time_s
     t_ref = float(case.pings.time_s[0]) if t_ref is None else float(t_ref)
     ypr = a.ypr()
-    roll = fit_axis(t, ypr[:, 2], t_ref, max_modes, fixed_modes)
-    pitch = fit_axis(t, ypr[:, 1], t_ref, max_modes, fixed_modes)
+    if per_axis:
+        fr = fit_modes(t, ypr[:, 2], t_ref, max_modes, fixed_modes)
+        fp = fit_modes(t, ypr[:, 1], t_ref, max_modes, fixed_modes)
+        modes = np.vstack([fr.modes, fp.modes])
+        roll_cs = np.vstack([fr.cs[0], np.zeros_like(fp.cs[0])])
+        pitch_cs = np.vstack([np.zeros_like(fr.cs[0]), fp.cs[0]])
+        biases, sig_tilt, trail = (fr.biases[0], fp.biases[0]), (fp.sigmas[0], fr.sigmas[0]), fr.bic_trail + fp.bic_trail
+    else:
+        f = fit_modes(t, ypr[:, [2, 1]], t_ref, max_modes, fixed_modes)
+        modes, roll_cs, pitch_cs = f.modes, f.cs[0], f.cs[1]
+        biases, sig_tilt, trail = (f.biases[0], f.biases[1]), (f.sigmas[1], f.sigmas[0]), f.bic_trail
 
-    # Yaw: trend polynomial plus the roll and pitch oscillations, each scaled (linear).
-    osc = []
-    for modes in (roll.modes, pitch.modes):
-        for c, s, w, v in modes:
-            tau = t - t_ref
-            osc.append(np.exp(-v * tau) * (c * np.cos(w * tau) + s * np.sin(w * tau)))
+    # Yaw: trend polynomial plus every mode with its own (C, S): linear least squares.
+    osc = _design(t, modes, t_ref)[:, 1:]
     best = None
     for order in range(max_trend_order + 1):
-        A = np.column_stack([(t - t_ref) ** k for k in range(order + 1)] + osc)
-        coef, *_ = np.linalg.lstsq(A, ypr[:, 0], rcond=None)
-        rss = float(np.sum((ypr[:, 0] - A @ coef) ** 2))
-        bic = _bic(rss, t.size, A.shape[1])
+        X = np.column_stack([(t - t_ref) ** k for k in range(order + 1)] + [osc])
+        coef, *_ = np.linalg.lstsq(X, ypr[:, 0], rcond=None)
+        rss = float(np.sum((ypr[:, 0] - X @ coef) ** 2))
+        bic = _bic(rss, t.size, X.shape[1])
         if best is None or bic < best[0] - BIC_MARGIN:
-            best = (bic, order, coef, rss, A.shape[1])
+            best = (bic, order, coef, rss, X.shape[1])
     _, order, coef, rss, k = best
     params = AttitudeParams(
-        roll_modes=roll.modes,
-        roll_bias=roll.bias,
-        pitch_modes=pitch.modes,
-        pitch_bias=pitch.bias,
-        yaw_trend=coef[: order + 1],
-        yaw_coupling=coef[order + 1:],
-        t_ref_s=t_ref,
+        modes=modes, roll_bias=float(biases[0]), roll_cs=roll_cs, pitch_bias=float(biases[1]), pitch_cs=pitch_cs,
+        yaw_trend=coef[: order + 1], yaw_cs=coef[order + 1:].reshape(-1, 2), t_ref_s=t_ref,
     )
-    return AttitudeFit(params, roll, pitch, float(np.sqrt(rss / max(t.size - k, 1))), order)
+    sig_heading = float(np.sqrt(rss / max(t.size - k, 1)))
+    return AttitudeFit(params, np.array([sig_heading, *sig_tilt]), order, trail)

@@ -17,6 +17,7 @@ error velocity for bottom track) and are re-estimated from the fit's residuals.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -222,11 +223,11 @@ def _hat_basis(times, knots) -> np.ndarray:
 
 
 def dominant_period_s(fit: AttitudeFit) -> float:
-    modes = np.vstack([fit.roll.modes, fit.pitch.modes])
-    if modes.size == 0:
+    p = fit.params
+    if p.modes.size == 0:
         return np.inf
-    amp = np.hypot(modes[:, 0], modes[:, 1])
-    return float(2 * np.pi / modes[int(np.argmax(amp)), 2])
+    amp = np.hypot(*p.roll_cs.T) + np.hypot(*p.pitch_cs.T)
+    return float(2 * np.pi / p.modes[int(np.argmax(amp)), 0])
 
 
 def choose_timing(case: Case, fit: AttitudeFit, requested: str = "auto") -> str:
@@ -257,7 +258,8 @@ class CalibrationProblem:
     def __init__(self, case: Case, config: CalibrationConfig, fit: AttitudeFit | None = None):
         self.case, self.config = case, config
         self.two_stage = config.method == "two-stage"
-        self.fit = fit or fit_attitude(case, max_modes=config.max_modes, fixed_modes=1 if self.two_stage else config.modes)
+        self.fit = fit or fit_attitude(case, max_modes=config.max_modes, fixed_modes=1 if self.two_stage else config.modes,
+                                       per_axis=self.two_stage)
         self.timing = choose_timing(case, self.fit, config.timing)
         self.frame = case.attitude.frame
         self.head_sensor = self.frame == "transducer"
@@ -397,31 +399,26 @@ class CalibrationProblem:
 
     # ------------------------------------------------------------------ helpers
     def _attitude_bounds(self, params: AttitudeParams):
+        """Names, scales and bounds of the attitude block (frequencies kept near the pre-fit's)."""
         lay = params.layout
-        names, scale, lo, hi = [], [], [], []
-        for axis, modes, bias in (("roll", params.roll_modes, params.roll_bias), ("pitch", params.pitch_modes, params.pitch_bias)):
-            for k, (c, s, w, v) in enumerate(modes):
-                names += [f"{axis}{k + 1}_cos", f"{axis}{k + 1}_sin", f"{axis}{k + 1}_omega", f"{axis}{k + 1}_decay"]
-                amp = max(np.hypot(c, s), 1e-3)
-                scale += [amp, amp, w * 0.01, 0.05]
-                lo += [-np.inf, -np.inf, 0.8 * w, 0.0]
-                hi += [np.inf, np.inf, 1.25 * w, 3.0]
-            names.append(f"{axis}_bias")
-            scale.append(0.01)
-            lo.append(-np.pi / 2)
-            hi.append(np.pi / 2)
-        for k in range(lay.yaw_trend_order + 1):
-            names.append(f"yaw_trend{k}")
-            scale.append(1.0 if k == 0 else 0.01 ** k)
-            lo.append(-np.inf)
-            hi.append(np.inf)
-        for k in range(lay.n_roll + lay.n_pitch):
-            names.append(f"yaw_coupling{k + 1}")
-            scale.append(0.1)
-            lo.append(-10.0)
-            hi.append(10.0)
-        # reorder to the layout's block order (roll modes, roll bias, pitch modes, pitch bias, ...)
-        return names, scale, lo, hi
+        names = lay.names()
+        s = lay.slices()
+        scale = np.ones(lay.size)
+        lo = np.full(lay.size, -np.inf)
+        hi = np.full(lay.size, np.inf)
+        for k, (w, _) in enumerate(params.modes):
+            i = s["modes"].start + 2 * k
+            scale[i], lo[i], hi[i] = 0.01 * w, 0.8 * w, 1.25 * w
+            scale[i + 1], lo[i + 1], hi[i + 1] = 0.05, 0.0, 3.0
+        for axis in ("roll", "pitch", "yaw"):
+            cs = getattr(params, f"{axis}_cs")
+            amp = np.maximum(np.hypot(cs[:, 0], cs[:, 1]), 1e-3)
+            scale[s[f"{axis}_cs"]] = np.repeat(amp, 2)
+        for axis in ("roll", "pitch"):
+            i = s[f"{axis}_bias"].start
+            scale[i], lo[i], hi[i] = 0.01, -np.pi / 2, np.pi / 2
+        scale[s["yaw_trend"]] = [1.0 if k == 0 else 0.01**k for k in range(lay.yaw_trend_order + 1)]
+        return names, scale.tolist(), lo.tolist(), hi.tolist()
 
     def _default_knot_interval(self) -> float:
         ref = self.case.reference
@@ -448,8 +445,8 @@ class CalibrationProblem:
     def _initial_sigmas(self) -> dict:
         s = {"bt": bt_noise_from_error_velocity(self.case)}
         if not self.two_stage:
-            s.update(heading=max(self.fit.heading_sigma, 1e-4), pitch=max(self.fit.pitch.sigma, 1e-4),
-                     roll=max(self.fit.roll.sigma, 1e-4))
+            s.update(heading=max(self.fit.sigmas[0], 1e-4), pitch=max(self.fit.sigmas[1], 1e-4),
+                     roll=max(self.fit.sigmas[2], 1e-4))
         if self.use_ranges:
             s["range"] = 0.02
         if self.use_reference:
@@ -496,30 +493,25 @@ class CalibrationProblem:
         return np.array([0.0, 0.0, 0.1 * self.lever_box])
 
     def _jitter(self, params: AttitudeParams, u_omega: float, u_decay: float) -> AttitudeParams:
-        def j(modes):
-            m = modes.copy()
-            if m.size:
-                m[:, 2] *= 1 + 0.01 * u_omega
-                m[:, 3] = np.clip(m[:, 3] * (1 + 0.5 * u_decay), 0.0, 3.0)
-            return m
-
-        return AttitudeParams(j(params.roll_modes), params.roll_bias, j(params.pitch_modes), params.pitch_bias,
-                              params.yaw_trend, params.yaw_coupling, params.t_ref_s)
+        modes = params.modes.copy()
+        if modes.size:
+            modes[:, 0] *= 1 + 0.01 * u_omega
+            modes[:, 1] = np.clip(modes[:, 1] * (1 + 0.5 * u_decay), 0.0, 3.0)
+        return dataclasses.replace(params, modes=modes)
 
     def _empirical_params(self) -> AttitudeParams | None:
+        """The pre-fit with its strongest mode's frequency and decay from the hull figures (Eqs. 36-47)."""
         from ..models.empirical import motion_guess
 
         v = self.case.vessel
-        if not (v.length_m and v.beam_m and v.height_m and v.mass_kg) or self.fit.roll.modes.size == 0:
+        p = self.fit.params
+        if not (v.length_m and v.beam_m and v.height_m and v.mass_kg) or p.modes.size == 0:
             return None
         g = motion_guess(v.length_m, v.beam_m, v.height_m, v.mass_kg, v.draft_m, v.displaced_volume_m3)
-        p = self.fit.params
-        roll, pitch = p.roll_modes.copy(), p.pitch_modes.copy()
-        roll[0, 2:] = [g.roll_damped_rad_s, g.roll_decay_1_s]
-        if pitch.size:
-            pitch[0, 2:] = [g.roll_damped_rad_s if self.head_sensor else g.pitch_damped_rad_s,
-                            g.roll_decay_1_s if self.head_sensor else g.pitch_decay_1_s]
-        return AttitudeParams(roll, p.roll_bias, pitch, p.pitch_bias, p.yaw_trend, p.yaw_coupling, p.t_ref_s)
+        strongest = int(np.argmax(np.hypot(*p.roll_cs.T) + np.hypot(*p.pitch_cs.T)))
+        modes = p.modes.copy()
+        modes[strongest] = [g.roll_damped_rad_s, g.roll_decay_1_s]
+        return dataclasses.replace(p, modes=modes)
 
     def _x_from(self, params: AttitudeParams, angles, centre) -> np.ndarray:
         parts = [] if self.two_stage else [params.pack()]

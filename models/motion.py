@@ -11,9 +11,14 @@ steady wave-forced oscillation. Internally a mode is written about a fixed refer
 time t_ref as exp(-v (t - t_ref)) [C cos n1 (t - t_ref) + S sin n1 (t - t_ref)]: the
 same family, but linear in (C, S), so no two parameter sets give the same curve
 (the paper's (A, t0) repeats itself every period). :func:`paper_to_cs` and
-:func:`cs_to_paper` convert exactly. Yaw is a slow polynomial trend plus the roll and
-pitch oscillations, each scaled by a coupling coefficient, so it shares their
-frequencies and decays (the paper fits yaw with the roll model's t0 and n1).
+:func:`cs_to_paper` convert exactly.
+
+A mode is a physical oscillation of the vessel: one frequency and decay, seen by
+every axis with its own (C, S) -- a sensor whose axes are turned (inside an ADCP
+head turned 45 degrees, say) sees the roll mode in both its roll and its pitch.
+Yaw is a slow polynomial trend plus the same modes, so it shares their frequencies
+and decays (the paper fits yaw with the roll model's t0 and n1; a free yaw
+frequency overfits heading noise).
 
 The parameters of a model live in one flat vector laid out by
 :class:`AttitudeLayout`; :func:`attitude_function` returns a CasADi Function of
@@ -28,9 +33,6 @@ import casadi as ca
 import numpy as np
 
 from .rotations import euler_matrix, unskew
-
-MODE_FIELDS = ("cos_rad", "sin_rad", "omega_rad_s", "decay_1_s")
-
 
 def damped_mode(t, amplitude, t0, omega, decay):
     """Free decay released at t0 with zero rate (Eqs. 34, 41-42)."""
@@ -67,25 +69,24 @@ def cs_to_paper(c, s, omega, decay, t_ref):
 
 @dataclass(frozen=True)
 class AttitudeLayout:
-    """Shape of an attitude model: modes per axis and the yaw trend's order.
+    """Shape of an attitude model: number of shared modes and the yaw trend's order.
 
     Parameters
     ----------
-    n_roll, n_pitch : int
-        Number of damped modes of roll and pitch (>= 0).
+    n_modes : int
+        Damped modes (>= 0), each with one frequency and decay shared by all axes.
     yaw_trend_order : int
         Degree of the yaw trend polynomial in (t - t_ref_s).
     t_ref_s : float
-        Reference time of the yaw trend (keeps the polynomial well conditioned).
+        Reference time of the (C, S) mode form and of the yaw trend.
     """
 
-    n_roll: int = 1
-    n_pitch: int = 1
+    n_modes: int = 1
     yaw_trend_order: int = 1
     t_ref_s: float = 0.0
 
     def __post_init__(self):
-        for name in ("n_roll", "n_pitch", "yaw_trend_order"):
+        for name in ("n_modes", "yaw_trend_order"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 0:
                 raise ValueError(f"AttitudeLayout.{name}: expected an integer >= 0, got {value!r}")
@@ -93,68 +94,62 @@ class AttitudeLayout:
     @property
     def size(self) -> int:
         """Length of the flat parameter vector."""
-        return 4 * self.n_roll + 1 + 4 * self.n_pitch + 1 + (self.yaw_trend_order + 1) + self.n_roll + self.n_pitch
+        return 2 * self.n_modes + 2 * (1 + 2 * self.n_modes) + (self.yaw_trend_order + 1) + 2 * self.n_modes
 
     def slices(self) -> dict[str, slice]:
         """Where each block sits in the flat vector."""
         out, k = {}, 0
-        for name, n in (
-            ("roll_modes", 4 * self.n_roll),
-            ("roll_bias", 1),
-            ("pitch_modes", 4 * self.n_pitch),
-            ("pitch_bias", 1),
-            ("yaw_trend", self.yaw_trend_order + 1),
-            ("yaw_coupling", self.n_roll + self.n_pitch),
-        ):
-            out[name] = slice(k, k + n)
-            k += n
+        n = self.n_modes
+        for name, size in (("modes", 2 * n), ("roll_bias", 1), ("roll_cs", 2 * n), ("pitch_bias", 1),
+                           ("pitch_cs", 2 * n), ("yaw_trend", self.yaw_trend_order + 1), ("yaw_cs", 2 * n)):
+            out[name] = slice(k, k + size)
+            k += size
         return out
+
+    def names(self) -> list[str]:
+        """A name for every entry of the flat vector."""
+        n = self.n_modes
+        names = [f"mode{k + 1}_{q}" for k in range(n) for q in ("omega", "decay")]
+        for axis in ("roll", "pitch"):
+            names += [f"{axis}_bias"] + [f"{axis}_mode{k + 1}_{q}" for k in range(n) for q in ("cos", "sin")]
+        names += [f"yaw_trend{k}" for k in range(self.yaw_trend_order + 1)]
+        names += [f"yaw_mode{k + 1}_{q}" for k in range(n) for q in ("cos", "sin")]
+        return names
 
 
 @dataclass(frozen=True)
 class AttitudeParams:
     """Numbers of one attitude model; ``pack``/``unpack`` map to the flat vector.
 
-    roll_modes and pitch_modes are (n, 4) arrays of (C_rad, S_rad, omega_rad_s,
-    decay_1_s) about t_ref_s (see :func:`mode_cs`); yaw_trend holds polynomial coefficients in
-    (t - t_ref_s), lowest order first; yaw_coupling scales each roll mode then each
-    pitch mode into the yaw oscillation.
+    ``modes`` is (n, 2): damped circular frequency (rad/s) and decay rate (1/s) of each
+    physical mode; ``roll_cs``, ``pitch_cs`` and ``yaw_cs`` are (n, 2) arrays of each
+    axis' (C, S) on those modes about ``t_ref_s`` (see :func:`mode_cs`); yaw adds a
+    trend polynomial in (t - t_ref_s), lowest order first.
     """
 
-    roll_modes: np.ndarray
+    modes: np.ndarray
     roll_bias: float
-    pitch_modes: np.ndarray
+    roll_cs: np.ndarray
     pitch_bias: float
+    pitch_cs: np.ndarray
     yaw_trend: np.ndarray
-    yaw_coupling: np.ndarray
+    yaw_cs: np.ndarray
     t_ref_s: float = 0.0
 
     @property
     def layout(self) -> AttitudeLayout:
-        return AttitudeLayout(
-            n_roll=int(np.shape(self.roll_modes)[0]),
-            n_pitch=int(np.shape(self.pitch_modes)[0]),
-            yaw_trend_order=int(len(self.yaw_trend) - 1),
-            t_ref_s=float(self.t_ref_s),
-        )
+        return AttitudeLayout(n_modes=int(np.shape(self.modes)[0]), yaw_trend_order=int(len(self.yaw_trend) - 1),
+                              t_ref_s=float(self.t_ref_s))
 
     def pack(self) -> np.ndarray:
-        lay = self.layout
-        if len(self.yaw_coupling) != lay.n_roll + lay.n_pitch:
-            raise ValueError(
-                f"yaw_coupling: expected {lay.n_roll + lay.n_pitch} values (one per roll and pitch mode), "
-                f"got {len(self.yaw_coupling)}"
-            )
-        return np.concatenate(
-            [
-                np.reshape(self.roll_modes, -1),
-                [self.roll_bias],
-                np.reshape(self.pitch_modes, -1),
-                [self.pitch_bias],
-                np.asarray(self.yaw_trend, dtype=float),
-                np.asarray(self.yaw_coupling, dtype=float),
-            ]
-        ).astype(float)
+        n = self.layout.n_modes
+        for name in ("roll_cs", "pitch_cs", "yaw_cs"):
+            if np.shape(getattr(self, name)) != (n, 2):
+                raise ValueError(f"{name}: expected shape ({n}, 2) for {n} modes, got {np.shape(getattr(self, name))}")
+        return np.concatenate([
+            np.reshape(self.modes, -1), [self.roll_bias], np.reshape(self.roll_cs, -1), [self.pitch_bias],
+            np.reshape(self.pitch_cs, -1), np.asarray(self.yaw_trend, dtype=float), np.reshape(self.yaw_cs, -1),
+        ]).astype(float)
 
     @classmethod
     def unpack(cls, p, layout: AttitudeLayout) -> "AttitudeParams":
@@ -162,78 +157,83 @@ class AttitudeParams:
         if p.size != layout.size:
             raise ValueError(f"attitude parameters: expected {layout.size} values for {layout}, got {p.size}")
         s = layout.slices()
+        n = layout.n_modes
         return cls(
-            roll_modes=p[s["roll_modes"]].reshape(layout.n_roll, 4),
+            modes=p[s["modes"]].reshape(n, 2),
             roll_bias=float(p[s["roll_bias"]][0]),
-            pitch_modes=p[s["pitch_modes"]].reshape(layout.n_pitch, 4),
+            roll_cs=p[s["roll_cs"]].reshape(n, 2),
             pitch_bias=float(p[s["pitch_bias"]][0]),
+            pitch_cs=p[s["pitch_cs"]].reshape(n, 2),
             yaw_trend=p[s["yaw_trend"]].copy(),
-            yaw_coupling=p[s["yaw_coupling"]].copy(),
+            yaw_cs=p[s["yaw_cs"]].reshape(n, 2),
             t_ref_s=layout.t_ref_s,
         )
 
-    def to_dict(self) -> dict:
-        """JSON-ready description per axis; each mode also in the paper's (phi_0, t_0) form."""
+    @classmethod
+    def from_axis_modes(cls, roll_modes, roll_bias, pitch_modes, pitch_bias, yaw_trend, yaw_coupling=None,
+                        t_ref_s: float = 0.0) -> "AttitudeParams":
+        """Build from per-axis modes in the paper's form: rows (A, t0, omega, decay).
 
-        def modes(rows):
+        Roll's and pitch's modes become shared modes (zero on the other axis); yaw
+        follows each mode scaled by ``yaw_coupling`` (one value per roll then pitch mode).
+        """
+        rows = [np.asarray(m, dtype=float).reshape(-1, 4) for m in (roll_modes, pitch_modes)]
+        n_r, n_p = len(rows[0]), len(rows[1])
+        coupling = np.zeros(n_r + n_p) if yaw_coupling is None else np.asarray(yaw_coupling, dtype=float)
+        if coupling.size != n_r + n_p:
+            raise ValueError(f"yaw_coupling: expected {n_r + n_p} values (one per roll and pitch mode), got {coupling.size}")
+        modes = np.array([[w, v] for rws in rows for _, _, w, v in rws]).reshape(-1, 2)
+        cs = np.array([paper_to_cs(a, t0, w, v, t_ref_s) for rws in rows for a, t0, w, v in rws]).reshape(-1, 2)
+        roll_cs, pitch_cs = cs.copy(), cs.copy()
+        roll_cs[n_r:] = 0.0
+        pitch_cs[:n_r] = 0.0
+        return cls(modes, float(roll_bias), roll_cs, float(pitch_bias), pitch_cs, np.asarray(yaw_trend, dtype=float),
+                   cs * coupling[:, None], float(t_ref_s))
+
+    def to_dict(self) -> dict:
+        """JSON-ready description; each axis' mode also in the paper's (phi_0, t_0) form."""
+
+        def axis(bias, cs):
             out = []
-            for m in rows:
-                d = dict(zip(MODE_FIELDS, map(float, m)))
-                a, t0 = cs_to_paper(*m, self.t_ref_s)
-                d.update(paper_amplitude_rad=float(a), paper_t0_s=float(t0))
-                out.append(d)
-            return out
+            for (c, s), (w, v) in zip(cs, self.modes):
+                a, t0 = cs_to_paper(c, s, w, v, self.t_ref_s)
+                out.append({"cos_rad": float(c), "sin_rad": float(s), "paper_amplitude_rad": float(a), "paper_t0_s": float(t0)})
+            return {"bias_rad": float(bias), "modes": out}
 
         return {
             "t_ref_s": float(self.t_ref_s),
-            "roll": {"bias_rad": self.roll_bias, "modes": modes(self.roll_modes)},
-            "pitch": {"bias_rad": self.pitch_bias, "modes": modes(self.pitch_modes)},
-            "yaw": {
-                "trend_coefficients": [float(c) for c in self.yaw_trend],
-                "coupling": [float(c) for c in self.yaw_coupling],
-            },
+            "modes": [{"omega_rad_s": float(w), "decay_1_s": float(v), "period_s": float(2 * np.pi / w)} for w, v in self.modes],
+            "roll": axis(self.roll_bias, self.roll_cs),
+            "pitch": axis(self.pitch_bias, self.pitch_cs),
+            "yaw": {"trend_coefficients": [float(c) for c in self.yaw_trend], **axis(0.0, self.yaw_cs)},
         }
 
     @classmethod
     def from_dict(cls, d: dict) -> "AttitudeParams":
-        def modes(axis):
-            rows = [[m[f] for f in MODE_FIELDS] for m in d[axis]["modes"]]
-            return np.array(rows, dtype=float).reshape(len(rows), 4)
-
-        return cls(
-            roll_modes=modes("roll"),
-            roll_bias=float(d["roll"]["bias_rad"]),
-            pitch_modes=modes("pitch"),
-            pitch_bias=float(d["pitch"]["bias_rad"]),
-            yaw_trend=np.array(d["yaw"]["trend_coefficients"], dtype=float),
-            yaw_coupling=np.array(d["yaw"]["coupling"], dtype=float),
-            t_ref_s=float(d.get("t_ref_s", 0.0)),
-        )
+        modes = np.array([[m["omega_rad_s"], m["decay_1_s"]] for m in d["modes"]], dtype=float).reshape(-1, 2)
+        cs = lambda ax: np.array([[m["cos_rad"], m["sin_rad"]] for m in d[ax]["modes"]], dtype=float).reshape(-1, 2)
+        return cls(modes, float(d["roll"]["bias_rad"]), cs("roll"), float(d["pitch"]["bias_rad"]), cs("pitch"),
+                   np.array(d["yaw"]["trend_coefficients"], dtype=float), cs("yaw"), float(d.get("t_ref_s", 0.0)))
 
 
 def attitude_ypr(t, p, layout: AttitudeLayout):
     """Yaw, pitch, roll (3x1 expression) at time t for flat parameters p."""
     s = layout.slices()
-
-    def oscillations(block, n):
-        q = p[s[block]]
-        return [mode_cs(t, q[4 * k], q[4 * k + 1], q[4 * k + 2], q[4 * k + 3], layout.t_ref_s) for k in range(n)]
-
-    roll_osc = oscillations("roll_modes", layout.n_roll)
-    pitch_osc = oscillations("pitch_modes", layout.n_pitch)
-    roll = p[s["roll_bias"]][0]
-    for osc in roll_osc:
-        roll = roll + osc
-    pitch = p[s["pitch_bias"]][0]
-    for osc in pitch_osc:
-        pitch = pitch + osc
-    trend = p[s["yaw_trend"]]
-    dt = t - layout.t_ref_s
-    yaw = sum(trend[k] * dt**k for k in range(layout.yaw_trend_order + 1))
-    coupling = p[s["yaw_coupling"]]
-    for k, osc in enumerate(roll_osc + pitch_osc):
-        yaw = yaw + coupling[k] * osc
-    return ca.vertcat(yaw, pitch, roll)
+    modes = p[s["modes"]]
+    out = []
+    for axis in ("yaw", "pitch", "roll"):
+        cs = p[s[f"{axis}_cs"]]
+        if axis == "yaw":
+            trend = p[s["yaw_trend"]]
+            value = 0
+            for k in range(layout.yaw_trend_order + 1):
+                value = value + trend[k] * (t - layout.t_ref_s) ** k
+        else:
+            value = p[s[f"{axis}_bias"]][0]
+        for k in range(layout.n_modes):
+            value = value + mode_cs(t, cs[2 * k], cs[2 * k + 1], modes[2 * k], modes[2 * k + 1], layout.t_ref_s)
+        out.append(value)
+    return ca.vertcat(*out)
 
 
 def attitude_function(layout: AttitudeLayout, sym=ca.SX) -> ca.Function:

@@ -20,14 +20,15 @@ FD_TOL = 1e-6  # finite differences against algorithmic differentiation
 EXACT_TOL = 1e-9  # identities that hold to rounding
 
 RNG = np.random.default_rng(12)
-TWO_AXES = AttitudeParams(
-    roll_modes=np.array([[0.25, -0.05, 6.11, 0.112], [0.03, 0.0, 2.0, 0.0]]),
+TWO_AXES = AttitudeParams.from_axis_modes(
+    roll_modes=[[0.25, -0.05, 6.11, 0.112], [0.03, 0.0, 2.0, 0.0]],
     roll_bias=0.01,
-    pitch_modes=np.array([[0.1, 0.3, 4.6, 0.2]]),
+    pitch_modes=[[0.1, 0.3, 4.6, 0.2]],
     pitch_bias=-0.02,
-    yaw_trend=np.array([0.7, 0.01, -1e-4]),
-    yaw_coupling=np.array([-0.3, 0.05, 0.1]),
+    yaw_trend=[0.7, 0.01, -1e-4],
+    yaw_coupling=[-0.3, 0.05, 0.1],
 )
+STILL = AttitudeParams.from_axis_modes([], 0.0, [], 0.0, [0.3])
 TIMES = np.linspace(0.0, 20.0, 41)
 
 
@@ -156,7 +157,7 @@ def test_no_rotation_radials_are_v_dot_d_and_asc_recovers_velocity(pool_still):
 def test_vessel_frame_sensor_needs_installation_angles():
     sc = noise_free(get_scenario("deep_ship"))
     sc = __import__("dataclasses").replace(sc, run=__import__("dataclasses").replace(
-        sc.run, motion=AttitudeParams(np.zeros((0, 4)), 0.0, np.zeros((0, 4)), 0.0, np.array([1.0]), np.zeros(0)),
+        sc.run, motion=AttitudeParams.from_axis_modes([], 0.0, [], 0.0, [1.0]),
         duration_s=30.0))
     case = simulate(sc, seed=2)
     good = asc(case, case.truth.installation_ypr_rad)
@@ -246,8 +247,7 @@ def test_no_rotation_asc_recovers_water_profile():
     import dataclasses
 
     sc = noise_free(get_scenario("deep_ocean"))
-    still = AttitudeParams(np.zeros((0, 4)), 0.0, np.zeros((0, 4)), 0.0, np.array([0.3]), np.zeros(0))
-    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, motion=still, duration_s=20.0))
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, motion=STILL, duration_s=20.0))
     case = simulate(sc, seed=1)
     result = asc(case, case.truth.installation_ypr_rad)
     measured = np.isfinite(result.water_velocity_m_s[..., 0])

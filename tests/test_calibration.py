@@ -1,0 +1,145 @@
+"""Joint calibration on small simulated cases: recovery within its own standard errors,
+identifiability honesty, formulation behaviour, the deep-water model."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import warnings
+
+import casadi as ca
+import numpy as np
+import pytest
+from conftest import noise_free
+
+from adcpdyn.cases.scenario import get_scenario
+from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem, calibrate
+from adcpdyn.estimators.evaluation import calibration_errors, true_attitude
+from adcpdyn.models.measurement import bottom_track_function
+from adcpdyn.models.motion import attitude_function
+from adcpdyn.models.rotations import euler_matrix
+from adcpdyn.models.simulator import simulate
+
+Z_MAX = 3.5  # |error / se| for a single estimate
+
+
+def _quiet_calibrate(case, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return calibrate(case, CalibrationConfig(**kw))
+
+
+@pytest.fixture(scope="module")
+def diag_case():
+    return simulate(get_scenario("pool_diag"), seed=11)
+
+
+@pytest.fixture(scope="module")
+def diag_result(diag_case):
+    return _quiet_calibrate(diag_case, formulation="exact", n_starts=6)
+
+
+def test_lever_arm_recovered_within_standard_errors(diag_case, diag_result):
+    r = diag_result
+    assert r.success and r.multistart.fraction_at_best >= 0.9
+    Ltb = np.asarray(euler_matrix(*diag_case.truth.installation_ypr_rad))
+    truth_head = diag_case.truth.radius_vectors_m @ Ltb
+    se = r.lever_arms_sensor_se_m
+    assert np.all(np.isfinite(se)) and np.max(se) < 0.005  # roll and pitch at different frequencies
+    assert np.max(np.abs(r.lever_arms_sensor_m - truth_head) / se) < Z_MAX
+    assert r.max_constraint_violation < 1e-8
+    assert all(0.5 < chi2 < 2.0 for chi2 in r.chi2_per_channel.values())
+
+
+def test_head_sensor_reports_head_frame_and_no_installation_angles(diag_result, tmp_path):
+    path = tmp_path / "calib.json"
+    diag_result.to_json(path)
+    out = json.loads(path.read_text())
+    assert out["attitude_frame"] == "transducer"
+    assert np.array(out["radius_vectors_head_m"], dtype=float).shape == (4, 3)
+    assert out["installation_ypr_rad"] == [None, None, None]
+    assert any("head" in w for w in out["warnings"])
+    for key in ("radius_vectors_m", "radius_vectors_se_m", "installation_ypr_se_rad", "attitude_model", "objective",
+                "max_constraint_violation", "formulation", "solver", "starts", "unobservable"):
+        assert key in out
+    assert len(out["starts"]) == 6 and {"objective", "iterations", "time_s", "status", "group"} <= set(out["starts"][0])
+
+
+def test_tangential_velocity_predicted_along_true_motion(diag_case, diag_result):
+    err = calibration_errors(diag_case, diag_result)
+    assert err["tangential_radial_rms_m_s"] < 0.003 < err["tangential_radial_signal_rms_m_s"]
+
+
+def test_no_rotation_gives_identifiability_warning_not_numbers(tmp_path):
+    case = simulate(get_scenario("pool_still"), seed=1)
+    r = _quiet_calibrate(case, formulation="exact", n_starts=3)
+    described = " ".join(u["description"] for u in r.uncertainty.unobservable if u["kind"] == "unobservable")
+    for axis in ("x_s", "y_s", "z_s"):
+        assert axis in described
+    path = tmp_path / "c.json"
+    r.to_json(path)
+    out = json.loads(path.read_text())
+    assert all(v is None for row in out["radius_vectors_head_m"] for v in row)
+    assert any("not determined" in w for w in out["warnings"])
+
+
+def test_exact_formulation_removes_along_beam_null_directions():
+    case = simulate(get_scenario("pool_m0"), seed=2)
+    along = lambda r: [u for u in r.uncertainty.unobservable if "along their own beam" in u["description"]]
+    free = _quiet_calibrate(case, formulation="free", n_starts=3, use_ranges=False)
+    exact = _quiet_calibrate(case, formulation="exact", n_starts=3, use_ranges=False)
+    assert len(along(free)) >= 3
+    assert along(exact) == []
+    assert np.all(np.isfinite(exact.lever_arms_sensor_se_m))
+
+
+def test_two_stage_baseline_runs_with_frozen_attitude():
+    case = simulate(get_scenario("pool_m0"), seed=3)
+    r = _quiet_calibrate(case, method="two-stage", formulation="paper", n_starts=3)
+    assert r.success
+    assert r.attitude.layout.n_modes == 2  # one per axis, as the paper fits them
+    assert np.count_nonzero(r.attitude.roll_cs[:, 0]) == 1 and np.count_nonzero(r.attitude.pitch_cs[:, 0]) == 1
+    assert "heading" not in r.chi2_per_channel  # the attitude was fitted in stage 1
+
+
+def test_vessel_frame_installation_yaw_against_reference():
+    sc = get_scenario("deep_ship")
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=150.0, water_depth_m=12.0))
+    case = simulate(sc, seed=4)
+    r = _quiet_calibrate(case, formulation="minimal", n_starts=3, timing="shallow")
+    assert r.installation_determined
+    z = (r.installation_ypr_rad - case.truth.installation_ypr_rad) / r.installation_ypr_se_rad
+    assert np.all(np.abs(z) < Z_MAX)
+    assert r.installation_ypr_se_rad[0] < np.deg2rad(0.1)
+
+
+def test_deep_measurement_model_matches_independent_simulator():
+    """The estimator's Eq. 68-70 model with the true parameters against the simulator's exact echoes."""
+    sc = noise_free(get_scenario("deep_ocean"))
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0, water=None))
+    case = simulate(sc, seed=1)
+    params = true_attitude(case)
+    att = attitude_function(params.layout)
+    r = case.truth.radius_vectors_m
+    g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
+    out = {}
+    for timing in ("deep", "shallow"):
+        f = bottom_track_function(att, timing).map(case.pings.n)
+        radial, rng = f(case.pings.time_s[None, :], case.environment.water_depth_m, g_depth,
+                      case.instrument.sound_speed_m_s, case.truth.vessel_velocity_m_s.T, params.pack(), r,
+                      case.truth.installation_ypr_rad, case.instrument.beam_directions())
+        out[timing] = np.asarray(radial).T - case.pings.bt_radial_m_s
+        if timing == "deep":
+            rel = np.asarray(rng).T / case.pings.bt_range_m - 1  # 350 m slant ranges, 0.45 s flights
+            assert np.max(np.abs(rel)) < 2e-4
+    assert np.max(np.abs(out["deep"])) < 2e-3  # only the exact-vs-first-order travel time differs
+    assert np.sqrt(np.mean(out["shallow"] ** 2)) > 5 * np.sqrt(np.mean(out["deep"] ** 2))
+
+
+def test_bad_configuration_is_rejected_with_the_allowed_values():
+    with pytest.raises(ValueError, match="formulation.*paper"):
+        CalibrationConfig(formulation="janus")
+    with pytest.raises(ValueError, match="method"):
+        CalibrationConfig(method="three-stage")
+    with pytest.raises(ValueError, match="n_starts"):
+        CalibrationConfig(n_starts=0)
