@@ -152,50 +152,69 @@ def cmd_compare_formulations(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """The main job on the built-in default case: simulate, ASC-correct, tabulate, plot."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """The main job on the built-in cases: calibrate on pool_m0, ASC on pool_m1, tables and figures."""
+    import warnings
 
     from .cases.corrected import write_correction
     from .cases.io import write_case
     from .cases.scenario import get_scenario
     from .cases.summary import summarise
     from .estimators.asc import asc
+    from .estimators.calibration import CalibrationConfig, CalibrationProblem
+    from .estimators.evaluation import calibration_errors
     from .estimators.metrics import format_table, velocity_metrics
+    from .models.rotations import euler_matrix
     from .models.simulator import simulate
+    from .plots import attitude_fit_figure, radius_vectors_figure, velocity_figure
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    case = simulate(get_scenario(args.scenario), seed=args.seed)
-    case_path = out / f"{args.scenario}.h5"
-    write_case(case, case_path)
-    print(summarise(_read(case_path)))
+    cases = {}
+    for name in (args.calibration_scenario, args.scenario):
+        case = simulate(get_scenario(name), seed=args.seed)
+        write_case(case, out / f"{name}.h5")
+        cases[name] = _read(out / f"{name}.h5")
+
+    # 1. calibration run (the paper's Measurement 0)
+    calib_case = cases[args.calibration_scenario]
+    print(summarise(calib_case))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        calib = CalibrationProblem(calib_case, CalibrationConfig(formulation="exact", n_starts=args.starts,
+                                                                  seed=args.seed)).solve()
+    calib.to_json(out / "calibration.json")
+    ms = calib.multistart
+    print(f"\njoint calibration ({calib.formulation}): {ms.message}, {ms.time_s:.2f} s solver time")
+    label = "head" if calib.attitude_frame == "transducer" else "body"
+    for i in range(4):
+        print(f"  r{i + 1} ({label} frame, m): " + "  ".join(
+            f"{v:+.4f} +- {s:.4f}" for v, s in zip(calib.lever_arms_sensor_m[i], calib.lever_arms_sensor_se_m[i])))
+    for w in calib.warnings:
+        print(f"  warning: {w}")
+    err = calibration_errors(calib_case, calib)
+    print(f"  tangential radial velocity along the true motion: {1e3 * err['tangential_radial_rms_m_s']:.2f} mm/s RMS "
+          f"error (signal {1e3 * err['tangential_radial_signal_rms_m_s']:.1f} mm/s)")
+    truth = calib_case.truth.radius_vectors_m
+    if calib.attitude_frame == "transducer":
+        truth = truth @ np.asarray(euler_matrix(*calib_case.truth.installation_ypr_rad))
+    attitude_fit_figure(calib_case, calib.attitude, out / "attitude_fit.png")
+    radius_vectors_figure(calib.lever_arms_sensor_m, calib.lever_arms_sensor_se_m, truth, label, out / "radius_vectors.png")
+
+    # 2. measurement run: the static correction against truth
+    case = cases[args.scenario]
     corr = asc(case)
-    write_correction(corr, out / f"{args.scenario}_asc.h5", source_case=str(case_path))
-    truth = case.truth.vessel_velocity_m_s
-    table = {"asc": velocity_metrics(corr.time_s, corr.vessel_velocity_m_s, truth),
-             "truth": velocity_metrics(corr.time_s, truth, truth)}
-    print()
+    write_correction(corr, out / f"{args.scenario}_asc.h5", source_case=str(out / f"{args.scenario}.h5"))
+    vt = case.truth.vessel_velocity_m_s
+    table = {"asc": velocity_metrics(corr.time_s, corr.vessel_velocity_m_s, vt),
+             "truth": velocity_metrics(corr.time_s, vt, vt)}
+    print(f"\n{args.scenario}: vessel velocity metrics against truth")
     print(format_table(table))
     with open(out / "metrics.json", "w") as fh:
-        json.dump(table, fh, indent=2)
-
-    t = corr.time_s
-    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    ax[0].plot(t, np.hypot(*corr.vessel_velocity_m_s[:, :2].T), "b.-", label="ASC")
-    ax[0].plot(t, np.hypot(*truth[:, :2].T), "k--", label="truth")
-    ax[0].set_ylabel("horizontal speed (m/s)")
-    ax[0].legend()
-    ax[1].plot(t, np.rad2deg(np.arctan2(corr.vessel_velocity_m_s[:, 1], corr.vessel_velocity_m_s[:, 0])), "b.", label="ASC")
-    ax[1].plot(t, np.rad2deg(np.arctan2(truth[:, 1], truth[:, 0])), "k--", label="truth")
-    ax[1].set_ylabel("direction (deg from north)")
-    ax[1].set_xlabel("time (s)")
-    fig.suptitle(f"{args.scenario} (seed {args.seed}): attitude static correction vs truth")
-    fig.tight_layout()
-    fig.savefig(out / "asc_vs_truth.png", dpi=120)
-    print(f"\nsaved {out / 'asc_vs_truth.png'}, {out / 'metrics.json'}, {case_path}")
+        json.dump({"calibration": err, args.scenario: table}, fh, indent=2)
+    velocity_figure(corr.time_s, {"ASC": corr.vessel_velocity_m_s}, vt,
+                    f"{args.scenario} (seed {args.seed}): attitude static correction vs truth", out / "asc_vs_truth.png")
+    print(f"\nsaved in {out}/: calibration.json, attitude_fit.png, radius_vectors.png, asc_vs_truth.png, "
+          "metrics.json and the case files")
     return 0
 
 
@@ -244,7 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_compare_formulations)
 
     s = sub.add_parser("demo", help="the main job on the built-in default case")
-    s.add_argument("--scenario", default=DEFAULT_CASE)
+    s.add_argument("--scenario", default=DEFAULT_CASE, help="measurement run to correct")
+    s.add_argument("--calibration-scenario", default="pool_m0", help="calibration run")
+    s.add_argument("--starts", type=int, default=24)
     s.add_argument("--seed", type=int, default=1)
     s.add_argument("--out", default="demo_out")
     s.set_defaults(func=cmd_demo)

@@ -580,7 +580,7 @@ class CalibrationProblem:
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))  # noqa: E501
         unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale,
-                          {"beam_dirs_sensor": self.beam_dirs_t @ Lst.T})
+                          {"beam_dirs_sensor": self.beam_dirs_t @ Lst.T, "frame": self.frame})
         se_x = unc.se_z * self.scale
         cov_z = unc.cov_z
         se_r = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Jr, cov_z, Jr), 0)).reshape(4, 3)

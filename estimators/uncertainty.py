@@ -19,7 +19,9 @@ RANK_RTOL = 1e-10
 UNDETERMINED_SE = 1e3  # in units of the variable scales
 WEAK_SE = 0.1  # a direction known no better than a tenth of its scale is "weakly determined"
 LEAK_RTOL = 0.01  # a quantity depends on an undetermined direction when its gradient leaks >1% into it
-AXIS_WORDS = {0: "x_s (bow / roll axis)", 1: "y_s (starboard / pitch axis)", 2: "z_s (down / yaw axis)"}
+AXIS_WORDS = {"vessel": {0: "x_b (bow / roll axis)", 1: "y_b (starboard / pitch axis)", 2: "z_b (down / yaw axis)"},
+              "transducer": {0: "the head's x_t (towards transducer 2)", 1: "the head's y_t (towards transducer 3)",
+                             2: "the head's z_t (out of the face)"}}
 
 
 @dataclass
@@ -63,11 +65,11 @@ def _describe(vec_x: np.ndarray, names: list, context: dict) -> str:
         mean = r.mean(axis=0)
         if np.linalg.norm(mean) * 2 > 0.95 and np.allclose(r, mean, atol=0.1):
             axis = int(np.argmax(np.abs(mean)))
-            return f"the whole head shifted along {AXIS_WORDS[axis]} ({text})"
+            return f"the whole head shifted along {AXIS_WORDS[context.get('frame', 'vessel')][axis]} ({text})"
     p_idx = [idx[n] for n in ("P_x", "P_y", "P_z") if n in idx]
     if p_idx and np.sum(v[p_idx] ** 2) > 0.95:
         axis = int(np.argmax(np.abs(v[p_idx])))
-        return f"the head centre P along {AXIS_WORDS[axis]} ({text})"
+        return f"the head centre P along {AXIS_WORDS[context.get('frame', 'vessel')][axis]} ({text})"
     if any(n.startswith("installation") for n in (names[i] for i in big[:1])):
         return f"installation angle {names[big[0]].split('_')[1]} ({text})"
     if all(names[i].startswith(("roll", "pitch", "yaw")) for i in big[:2]):
@@ -99,7 +101,11 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
         se[leak] = np.inf
     unobs, warns = [], []
     context = context or {}
+    attitude = np.array([n.startswith(("mode", "roll", "pitch", "yaw")) for n in names])
     weak = good & (lam < 1.0 / WEAK_SE**2)
+    # a weak direction of the attitude coefficients alone is reported by their SEs, not named here
+    weak &= np.array([np.sum(((Z @ V[:, j]) * scale)[~attitude] ** 2) / np.sum(((Z @ V[:, j]) * scale) ** 2) > 0.5
+                      if weak[j] else False for j in range(len(lam))])
     for kind, dirs, se_dir in (("unobservable", null_z, np.full(len(null_z), np.inf)),
                                ("weak", (Z @ V[:, weak]).T, 1.0 / np.sqrt(lam[weak]))):
         for d, s_d in zip(dirs, se_dir):

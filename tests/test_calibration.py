@@ -74,7 +74,7 @@ def test_no_rotation_gives_identifiability_warning_not_numbers(tmp_path):
     case = simulate(get_scenario("pool_still"), seed=1)
     r = _quiet_calibrate(case, formulation="exact", n_starts=3)
     described = " ".join(u["description"] for u in r.uncertainty.unobservable if u["kind"] == "unobservable")
-    for axis in ("x_s", "y_s", "z_s"):
+    for axis in ("x_t", "y_t", "z_t"):
         assert axis in described
     path = tmp_path / "c.json"
     r.to_json(path)
