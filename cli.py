@@ -218,6 +218,13 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from .solvers.bench import run
+
+    run(args.suite, args.quick, Path(args.out))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="adcpdyn", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -261,6 +268,12 @@ def build_parser() -> argparse.ArgumentParser:
     calibration_options(s)
     s.add_argument("--out", help="optional JSON of the table")
     s.set_defaults(func=cmd_compare_formulations)
+
+    s = sub.add_parser("bench", help="benchmarks with their targets")
+    s.add_argument("suite", help="calibration")
+    s.add_argument("--quick", action="store_true", help="fewer seeds")
+    s.add_argument("--out", default="benchmarks/results")
+    s.set_defaults(func=cmd_bench)
 
     s = sub.add_parser("demo", help="the main job on the built-in default case")
     s.add_argument("--scenario", default=DEFAULT_CASE, help="measurement run to correct")

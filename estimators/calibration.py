@@ -128,6 +128,7 @@ class CalibrationResult:
     attitude_frame: str
     lever_arms_sensor_m: np.ndarray  # lever arms in the sensor frame (head frame for a head sensor)
     lever_arms_sensor_se_m: np.ndarray
+    lever_arms_cov_m2: np.ndarray  # (12, 12) covariance of the sensor-frame lever arms (observable part)
     objective: float
     max_constraint_violation: float
     formulation: str
@@ -583,7 +584,8 @@ class CalibrationProblem:
                           {"beam_dirs_sensor": self.beam_dirs_t @ Lst.T, "frame": self.frame})
         se_x = unc.se_z * self.scale
         cov_z = unc.cov_z
-        se_r = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Jr, cov_z, Jr), 0)).reshape(4, 3)
+        cov_r = Jr @ cov_z @ Jr.T  # (12, 12), rows r1x, r1y, r1z, r2x, ...
+        se_r = np.sqrt(np.maximum(np.diag(cov_r), 0)).reshape(4, 3)
         se_st = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Jst, cov_z, Jst), 0)) if Jst.size else np.zeros(3)
         r_s = r_flat.reshape(4, 3)
         se_r[~unc.determined_mask(Jr).reshape(4, 3)] = np.inf
@@ -627,7 +629,7 @@ class CalibrationProblem:
         return CalibrationResult(
             radius_vectors_m=radius, radius_vectors_se_m=radius_se, installation_ypr_rad=ypr,
             installation_ypr_se_rad=ypr_se, installation_determined=not self.head_sensor and bool(np.all(np.isfinite(ypr_se))),
-            attitude=p_att, attitude_frame=self.frame, lever_arms_sensor_m=r_s, lever_arms_sensor_se_m=se_r,
+            attitude=p_att, attitude_frame=self.frame, lever_arms_sensor_m=r_s, lever_arms_sensor_se_m=se_r, lever_arms_cov_m2=cov_r,
             objective=float(ms.objective), max_constraint_violation=viol, formulation=self.config.formulation,
             timing=self.timing, noise_sigma=dict(self.sigma), chi2_per_channel=chi2, multistart=ms, uncertainty=unc,
             x_names=list(self.names), x=x, x_se=se_x, config=self.config,

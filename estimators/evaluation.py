@@ -46,11 +46,18 @@ def calibration_errors(case: Case, result) -> dict:
     err = result.lever_arms_sensor_m - true_sensor
     se = result.lever_arms_sensor_se_m
     ok = np.isfinite(se) & (se > 0)
+    # error in the observable subspace, in units of the reported covariance (the bound)
+    lam, V = np.linalg.eigh(result.lever_arms_cov_m2)
+    keep = lam > 1e-12 * max(lam.max(), 1e-300)
+    proj = V[:, keep].T @ err.reshape(-1)
     out = {
+        "observable_rank": int(keep.sum()),
+        "observable_mahalanobis2": float(np.sum(proj**2 / lam[keep])),
         "tangential_radial_rms_m_s": float(np.sqrt(np.mean((v_est - v_true) ** 2))),
         "tangential_radial_signal_rms_m_s": float(np.sqrt(np.mean(v_true**2))),
         "lever_arm_rms_error_m": float(np.sqrt(np.mean(err**2))),
         "lever_arm_max_abs_z": float(np.max(np.abs(err[ok] / se[ok]))) if ok.any() else float("nan"),
+        "lever_arm_z": np.where(ok, err / np.where(ok, se, 1.0), np.nan).reshape(-1).tolist(),
     }
     if frame == "vessel" and result.installation_determined:
         d = result.installation_ypr_rad - truth.installation_ypr_rad

@@ -143,3 +143,26 @@ def test_bad_configuration_is_rejected_with_the_allowed_values():
         CalibrationConfig(method="three-stage")
     with pytest.raises(ValueError, match="n_starts"):
         CalibrationConfig(n_starts=0)
+
+
+def test_three_ping_exact_solve_is_singular_along_the_beams_unless_frames_are_mixed():
+    from adcpdyn.estimators.three_ping import three_ping_solve
+
+    case = simulate(noise_free(get_scenario("pool_diag")), seed=3)
+    consistent = three_ping_solve(case)
+    assert consistent.ranks.tolist() == [2, 2, 2, 2]
+    assert len(consistent.undetermined) == 4 and "along its own beam" in consistent.undetermined[0]
+    literal = three_ping_solve(case, tangential="paper_literal")
+    assert literal.ranks.tolist() == [3, 3, 3, 3]  # invertible only because Omega r mixes frames
+
+
+def test_qiao_baseline_finds_installation_yaw():
+    from adcpdyn.estimators.qiao import qiao_calibration
+
+    sc = get_scenario("deep_ship")
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=120.0))
+    case = simulate(sc, seed=2)
+    q = qiao_calibration(case)
+    assert abs(q.installation_ypr_rad[0] - case.truth.installation_ypr_rad[0]) < 4 * q.installation_ypr_se_rad[0]
+    with pytest.raises(ValueError, match="frame"):
+        qiao_calibration(simulate(get_scenario("pool_m1"), seed=1))

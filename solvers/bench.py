@@ -1,0 +1,149 @@
+"""``adcpdyn bench``: accuracy and speed figures, printed with their targets and verdicts.
+
+Every figure is measured in the run that prints it; comparisons between methods are
+ratios from the same run. Results go to ``benchmarks/results/<suite>.json`` with the
+machine, versions and seeds.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+import warnings
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+SUITES = ("calibration",)
+
+
+def _machine() -> dict:
+    import os
+
+    return {"python": platform.python_version(), "casadi": ca.__version__, "numpy": np.__version__,
+            "machine": platform.machine(), "cpus": os.cpu_count(), "platform": platform.platform()}
+
+
+def _calibrate(case, **kw):
+    from ..estimators.calibration import CalibrationConfig, CalibrationProblem
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tic = time.perf_counter()
+        r = CalibrationProblem(case, CalibrationConfig(**kw)).solve()
+        return r, time.perf_counter() - tic
+
+
+def bench_calibration(seeds: int = 20, starts: int = 8, deep_seeds: int = 2) -> dict:
+    """Joint vs two-stage calibration over noise seeds; installation angles vs Qiao et al."""
+    from ..cases.scenario import get_scenario
+    from ..estimators.evaluation import calibration_errors
+    from ..estimators.qiao import qiao_calibration
+    from ..models.simulator import simulate
+
+    methods = {
+        "joint_exact": dict(formulation="exact"),
+        "two_stage_paper": dict(method="two-stage", formulation="paper"),
+        "two_stage_paper_literal": dict(method="two-stage", formulation="paper", tangential="paper_literal"),
+    }
+    out: dict = {"suite": "calibration", "machine": _machine(), "seeds": list(range(1, seeds + 1)), "starts": starts,
+                 "scenarios": {}}
+    for scenario in ("pool_m0", "pool_diag"):
+        rows = {m: [] for m in methods}
+        for seed in range(1, seeds + 1):
+            case = simulate(get_scenario(scenario), seed=seed)
+            for name, kw in methods.items():
+                r, elapsed = _calibrate(case, n_starts=starts, seed=seed, **kw)
+                e = calibration_errors(case, r)
+                rows[name].append({"seed": seed, "time_s": elapsed, "success": r.success,
+                                   "fraction_at_best": r.multistart.fraction_at_best, **e})
+        out["scenarios"][scenario] = {m: _summarise(v) for m, v in rows.items()}
+        out["scenarios"][scenario]["per_seed"] = rows
+    # 32-start multistart on pool_m0: time and share of starts at the best
+    case = simulate(get_scenario("pool_m0"), seed=1)
+    r, elapsed = _calibrate(case, n_starts=32, formulation="exact")
+    out["multistart_32_pool_m0"] = {"wall_s": elapsed, "solver_s": r.multistart.time_s,
+                                    "fraction_at_best": r.multistart.fraction_at_best}
+    # installation angles on the deep ship: joint vs Qiao et al.
+    deep = []
+    for seed in range(1, deep_seeds + 1):
+        case = simulate(get_scenario("deep_ship"), seed=seed)
+        r, elapsed = _calibrate(case, n_starts=2, formulation="minimal", seed=seed)
+        q = qiao_calibration(case)
+        truth = case.truth.installation_ypr_rad
+        deep.append({"seed": seed, "time_s": elapsed,
+                     "joint_error_deg": np.rad2deg(r.installation_ypr_rad - truth).tolist(),
+                     "joint_se_deg": np.rad2deg(r.installation_ypr_se_rad).tolist(),
+                     "qiao_error_deg": np.rad2deg(q.installation_ypr_rad - truth).tolist(),
+                     "qiao_se_deg": np.rad2deg(q.installation_ypr_se_rad).tolist()})
+    out["deep_ship_installation"] = deep
+    return out
+
+
+def _summarise(rows: list) -> dict:
+    z = np.concatenate([np.asarray(r["lever_arm_z"], dtype=float) for r in rows])
+    z = z[np.isfinite(z)]
+    m2 = np.array([r["observable_mahalanobis2"] / max(r["observable_rank"], 1) for r in rows])
+    return {
+        "tangential_rms_mm_s_median": 1e3 * float(np.median([r["tangential_radial_rms_m_s"] for r in rows])),
+        "tangential_rms_mm_s_max": 1e3 * float(np.max([r["tangential_radial_rms_m_s"] for r in rows])),
+        "signal_mm_s": 1e3 * float(np.mean([r["tangential_radial_signal_rms_m_s"] for r in rows])),
+        "lever_rms_mm_median": 1e3 * float(np.median([r["lever_arm_rms_error_m"] for r in rows])),
+        "observable_error_over_bound": float(np.sqrt(np.mean(m2))),
+        "se_honest_fraction": float(np.mean(np.abs(z) < 3)) if z.size else float("nan"),
+        "fraction_at_best_mean": float(np.mean([r["fraction_at_best"] for r in rows])),
+        "time_s_median": float(np.median([r["time_s"] for r in rows])),
+        "success_fraction": float(np.mean([r["success"] for r in rows])),
+    }
+
+
+def print_calibration(res: dict) -> None:
+    print(f"calibration benchmark: {len(res['seeds'])} seeds, {res['starts']} starts per solve")
+    head = (f"{'scenario':<10}{'method':<26}{'tang mm/s med':>14}{'max':>7}{'signal':>8}{'lever mm':>9}"
+            f"{'err/bound':>10}{'|z|<3':>7}{'at best':>8}{'time s':>8}")
+    print(head)
+    for sc, methods in res["scenarios"].items():
+        for m, s in methods.items():
+            if m == "per_seed":
+                continue
+            print(f"{sc:<10}{m:<26}{s['tangential_rms_mm_s_median']:>14.3f}{s['tangential_rms_mm_s_max']:>7.2f}"
+                  f"{s['signal_mm_s']:>8.1f}{s['lever_rms_mm_median']:>9.2f}{s['observable_error_over_bound']:>10.2f}"
+                  f"{s['se_honest_fraction']:>7.2f}{s['fraction_at_best_mean']:>8.2f}{s['time_s_median']:>8.2f}")
+    j = res["scenarios"]["pool_m0"]["joint_exact"]
+    d = res["scenarios"]["pool_diag"]["joint_exact"]
+    ms = res["multistart_32_pool_m0"]
+    targets = [
+        ("pool_m0 tangential radial RMS <= 3 mm/s (max over seeds)", j["tangential_rms_mm_s_max"], j["tangential_rms_mm_s_max"] <= 3.0),
+        ("pool_m0 observable-subspace error <= 1.5x bound", j["observable_error_over_bound"], j["observable_error_over_bound"] <= 1.5),
+        ("pool_diag observable-subspace error <= 1.5x bound", d["observable_error_over_bound"], d["observable_error_over_bound"] <= 1.5),
+        ("pool_m0 |error/se| < 3 in >= 95% of components", j["se_honest_fraction"], j["se_honest_fraction"] >= 0.95),
+        ("pool_m0 32-start multistart: >= 90% of starts at the best", ms["fraction_at_best"], ms["fraction_at_best"] >= 0.9),
+        ("pool_m0 32-start multistart wall time < 2 s", ms["wall_s"], ms["wall_s"] < 2.0),
+    ]
+    for row in res["deep_ship_installation"]:
+        yaw_err, yaw_se, q_err = row["joint_error_deg"][0], row["joint_se_deg"][0], row["qiao_error_deg"][0]
+        targets.append((f"deep_ship seed {row['seed']}: |yaw error| < 0.1 deg and < 3 se", yaw_err,
+                        abs(yaw_err) < 0.1 and abs(yaw_err) < 3 * yaw_se))
+        targets.append((f"deep_ship seed {row['seed']}: joint |yaw error| <= Qiao's ({q_err:+.4f} deg)", yaw_err,
+                        abs(yaw_err) <= abs(q_err)))
+    print("\ntargets")
+    for label, value, ok in targets:
+        print(f"  [{'met' if ok else 'NOT met'}] {label}: {value:.4g}")
+    res["targets"] = [{"target": label, "value": float(value), "met": bool(ok)} for label, value, ok in targets]
+
+
+def run(suite: str, quick: bool, out_dir: Path) -> dict:
+    if suite not in SUITES:
+        raise ValueError(f"suite: expected one of {list(SUITES)}, got {suite!r}")
+    res = bench_calibration(seeds=5 if quick else 20, starts=8, deep_seeds=1 if quick else 3)
+    print_calibration(res)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"{suite}.json"
+    from ..estimators.calibration import _jsonable
+
+    with open(path, "w") as fh:
+        json.dump(_jsonable(res), fh, indent=2)
+    print(f"\nwrote {path}")
+    return res
