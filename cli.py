@@ -44,31 +44,83 @@ def cmd_info(args) -> int:
     return 0
 
 
-def _installation_from(calibration_path):
-    if calibration_path is None:
+CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
+
+
+def _load_calibration(path):
+    if path is None:
         return None
-    with open(calibration_path) as fh:
-        calib = json.load(fh)
-    if "installation_ypr_rad" not in calib:
-        raise ValueError(f"{calibration_path}: installation_ypr_rad: missing; expected 3 angles in radians")
-    return np.asarray(calib["installation_ypr_rad"], dtype=float)
+    with open(path) as fh:
+        return json.load(fh)
+
+
+def _correct(case, method, calibration):
+    from .estimators.adc import dynamic_correction
+    from .estimators.asc import asc
+
+    if method not in CORRECTION_METHODS:
+        raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
+    if method == "asc":
+        ypr = None
+        if calibration is not None and case.attitude.frame == "vessel":
+            ypr = _installation_from(calibration)
+        return asc(case, ypr)
+    return dynamic_correction(case, method, calibration)
+
+
+def _installation_from(calibration: dict):
+    value = calibration.get("installation_ypr_rad")
+    if value is None or any(v is None for v in value):
+        raise ValueError("calibration: installation_ypr_rad: missing or not determined; expected 3 angles in radians")
+    return np.asarray(value, dtype=float)
 
 
 def cmd_correct(args) -> int:
     from .cases.atomic import refuse_overwrite_input
     from .cases.corrected import write_correction
-    from .estimators.asc import asc
 
     refuse_overwrite_input(args.out, args.case, args.calibration)
     case = _read(args.case)
-    if args.method != "asc":
-        raise ValueError(f"--method: {args.method!r} is not available yet; expected one of ['asc']")
-    result = asc(case, _installation_from(args.calibration))
+    result = _correct(case, args.method, _load_calibration(args.calibration))
     write_correction(result, args.out, source_case=str(args.case))
     v = result.vessel_velocity_m_s
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
           f"mean horizontal speed {np.nanmean(np.hypot(v[:, 0], v[:, 1])):.4f} m/s, "
           f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    """Every correction method on one case: the paper's metrics table and figures."""
+    from .estimators.metrics import format_table, velocity_metrics
+    from .plots import velocity_figure
+
+    case = _read(args.case)
+    calibration = _load_calibration(args.calibration)
+    methods = [m for m in CORRECTION_METHODS if m != "oracle" or case.truth is not None]
+    if calibration is None:
+        methods = [m for m in methods if m in ("asc", "oracle")]
+    results = {m: _correct(case, m, calibration) for m in methods}
+    if case.truth is not None:
+        reference, label = case.truth.vessel_velocity_m_s, "truth"
+    elif case.reference is not None and case.reference.velocity_m_s is not None:
+        ref = case.reference
+        reference = np.column_stack([np.interp(case.pings.time_s, ref.time_s, ref.velocity_m_s[:, j]) for j in range(3)])
+        label = "reference"
+    else:
+        raise ValueError(f"{args.case}: /truth or /reference: needed to compare methods against something")
+    table = {m: velocity_metrics(r.time_s, r.vessel_velocity_m_s, reference) for m, r in results.items()}
+    table[label] = velocity_metrics(case.pings.time_s, reference, reference)
+    print(f"{case.name}: vessel velocity against {label}")
+    print(format_table(table))
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        with open(out / f"{case.name}_compare.json", "w") as fh:
+            json.dump(table, fh, indent=2)
+        velocity_figure(case.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, reference,
+                        f"{case.name}: corrections against {label}", out / f"{case.name}_compare.png")
+        print(f"saved {out / (case.name + '_compare.png')}, {out / (case.name + '_compare.json')}")
     return 0
 
 
@@ -244,10 +296,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("correct", help="correct every ping of a case")
     s.add_argument("case")
-    s.add_argument("--method", default="asc")
-    s.add_argument("--calibration", help="CALIB.json with installation_ypr_rad")
+    s.add_argument("--method", default="asc", help="asc | adc | paper_literal | rootfinder | oracle")
+    s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_correct)
+
+    s = sub.add_parser("compare", help="every correction method on one case: metrics table and figures")
+    s.add_argument("case")
+    s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
+    s.add_argument("--out", help="folder for the table (JSON) and figure")
+    s.set_defaults(func=cmd_compare)
 
     def calibration_options(s):
         s.add_argument("--formulation", default="exact", help="paper | exact | minimal | free")

@@ -371,26 +371,25 @@ class _Reader:
     def __init__(self, source: str):
         self.c = _Checker(source)
 
-    def group(self, parent: h5py.Group, name: str, required: bool = True):
+    def _member(self, parent: h5py.Group, name: str, kind: type, required: bool):
         path = f"{parent.name.rstrip('/')}/{name}"
         obj = parent.get(name)
+        word, other = ("group", "dataset") if kind is h5py.Group else ("dataset", "group")
         if obj is None:
             if required:
-                self.c.fail(path, "expected a required group, got none (missing)")
-            return None
-        if not isinstance(obj, h5py.Group):
-            self.c.fail(path, "expected a group, got a dataset")
-        return obj
+                self.c.fail(path, f"expected a required {word}, got none (missing)")
+            return None, path
+        if not isinstance(obj, kind):
+            self.c.fail(path, f"expected a {word}, got a {other}")
+        return obj, path
+
+    def group(self, parent: h5py.Group, name: str, required: bool = True):
+        return self._member(parent, name, h5py.Group, required)[0]
 
     def dataset(self, grp: h5py.Group, name: str, required: bool = True):
-        path = f"{grp.name.rstrip('/')}/{name}"
-        obj = grp.get(name)
+        obj, path = self._member(grp, name, h5py.Dataset, required)
         if obj is None:
-            if required:
-                self.c.fail(path, "expected a required dataset, got none (missing)")
             return None
-        if not isinstance(obj, h5py.Dataset):
-            self.c.fail(path, "expected a dataset, got a group")
         if obj.dtype.kind not in "iuf":
             self.c.fail(path, f"expected a numeric dataset, got dtype {obj.dtype}")
         return np.array(obj[()], dtype=np.float64)

@@ -100,6 +100,7 @@ class CalibrationConfig:
     nominal_installation_ypr_rad: tuple = (0.0, 0.0, 0.0)
     epsilon_rel: float = 0.05
     use_ranges: bool = True
+    workers: int = 2
     solver: SolverOptions = field(default_factory=SolverOptions)
 
     def __post_init__(self):
@@ -549,7 +550,9 @@ class CalibrationProblem:
         cfg = self.config
         x0s = self.start_points(cfg.n_starts, cfg.seed)
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
-        ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights())
+        make = lambda: build_solver(self.nlp, cfg.solver, "calibration", residuals=self.jacobian_fun)
+        ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
+                        make_solver=make)
         if cfg.estimate_noise:
             self.sigma = self._reestimate_sigmas(ms.x)
             refit = multistart(self.solver, ms.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)

@@ -155,7 +155,7 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
 
 
 def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: float = 1e-6,
-               x_scale=None, progress: bool | None = None) -> MultistartResult:
+               x_scale=None, progress: bool | None = None, workers: int = 1, make_solver=None) -> MultistartResult:
     """Solve from every row of ``x0s``; return the best with per-start records.
 
     Parameters
@@ -172,23 +172,54 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
         Typical magnitudes of x, to compare solutions position-wise when grouping.
     progress : bool, optional
         Show a progress bar (default: when stderr is a terminal).
+    workers : int
+        Threads solving starts at once. CasADi releases the GIL while it computes, so
+        threads use several cores; each thread gets its own solver from ``make_solver``
+        (a solver's memory is not shared between concurrent calls).
+    make_solver : callable, optional
+        Builds another solver like ``solver``; required when ``workers > 1``.
     """
     x0s = np.atleast_2d(np.asarray(x0s, dtype=float))
     if progress is None:
         progress = sys.stderr.isatty()
-    sols = []
-    records = []
-    for i in _progress(range(x0s.shape[0]), x0s.shape[0], progress):
+    n = x0s.shape[0]
+    workers = max(1, min(int(workers), n)) if make_solver is not None else 1
+    solvers = [solver] + [make_solver() for _ in range(workers - 1)]
+
+    def solve(i, s):
         tic = time.perf_counter()
-        sol = solver(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p)
+        sol = s(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p)
         elapsed = time.perf_counter() - tic
-        stats = solver.stats()
+        stats = s.stats()
         f = float(sol["f"])
-        records.append(
-            dict(index=i, objective=f if np.isfinite(f) else np.inf, iterations=int(stats.get("iter_count", -1)),
-                 time_s=elapsed, status=str(stats.get("return_status", "unknown")), success=bool(stats.get("success", False)))
-        )
-        sols.append((np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["g"]).ravel(), stats))
+        record = dict(index=i, objective=f if np.isfinite(f) else np.inf, iterations=int(stats.get("iter_count", -1)),
+                      time_s=elapsed, status=str(stats.get("return_status", "unknown")),
+                      success=bool(stats.get("success", False)))
+        return record, (np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["g"]).ravel())
+
+    if workers == 1:
+        done = [solve(i, solver) for i in _progress(range(n), n, progress)]
+    else:
+        import queue
+        from concurrent.futures import ThreadPoolExecutor, as_completed
+
+        idle = queue.Queue()
+        for s in solvers:
+            idle.put(s)
+
+        def task(i):
+            s = idle.get()
+            try:
+                return solve(i, s)
+            finally:
+                idle.put(s)
+
+        with ThreadPoolExecutor(workers) as pool:
+            futures = [pool.submit(task, i) for i in range(n)]
+            done = [f.result() for f in _progress(as_completed(futures), n, progress)]
+    done.sort(key=lambda item: item[0]["index"])
+    records = [d[0] for d in done]
+    sols = [d[1] for d in done]
 
     objectives = np.array([r["objective"] for r in records])
     ok = np.array([r["success"] for r in records])
@@ -208,7 +239,7 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
             groups.append((f, x))
     f_best = objectives[best]
     at_best = np.abs(objectives - f_best) <= objective_rtol * max(1.0, abs(f_best))
-    x, lam_g, g, stats = sols[best]
+    x, lam_g, g = sols[best]
     return MultistartResult(
         x=x,
         objective=float(f_best),

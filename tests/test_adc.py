@@ -1,0 +1,87 @@
+"""Per-ping dynamic correction: limits, the oracle on noise-free data, rootfinder vs closed form."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import noise_free
+
+from adcpdyn.cases.scenario import get_scenario
+from adcpdyn.cli import main
+from adcpdyn.estimators.adc import dynamic_correction
+from adcpdyn.estimators.asc import asc
+from adcpdyn.models.rotations import euler_matrix
+from adcpdyn.models.simulator import simulate
+
+
+def truth_calibration(case) -> dict:
+    """A calibration dict holding the simulator's true lever arms (what CALIB.json would hold)."""
+    t = case.truth
+    head = t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))
+    return {"radius_vectors_m": t.radius_vectors_m.tolist(), "radius_vectors_head_m": head.tolist(),
+            "installation_ypr_rad": t.installation_ypr_rad.tolist()}
+
+
+def test_no_rotation_dynamic_equals_static_correction(pool_still):
+    case = simulate(noise_free(pool_still), seed=2)
+    static = asc(case).vessel_velocity_m_s
+    for method in ("adc", "rootfinder"):
+        dyn = dynamic_correction(case, method, truth_calibration(case)).vessel_velocity_m_s
+        assert np.max(np.abs(dyn - static)) < 1e-9
+        assert np.max(np.abs(dyn - case.truth.vessel_velocity_m_s)) < 1e-9
+
+
+def test_oracle_removes_the_swaying_error_on_noise_free_data():
+    case = simulate(noise_free(get_scenario("pool_m1")), seed=4)
+    truth = case.truth.vessel_velocity_m_s
+    oracle = dynamic_correction(case, "oracle").vessel_velocity_m_s
+    static = asc(case).vessel_velocity_m_s
+    rms = lambda v: np.sqrt(np.mean(np.sum((v - truth) ** 2, axis=1)))
+    assert rms(oracle) < 1e-4 < 0.01 < rms(static)
+
+
+def test_rootfinder_agrees_with_closed_form_in_shallow_water(pool_m0):
+    case = simulate(noise_free(get_scenario("pool_m1")), seed=5)
+    calib = truth_calibration(case)
+    adc = dynamic_correction(case, "adc", calib)
+    rf = dynamic_correction(case, "rootfinder", calib)
+    assert np.max(np.abs(adc.vessel_velocity_m_s - rf.vessel_velocity_m_s)) < 1e-6
+    assert np.nanmax(np.abs(rf.error_velocity_m_s)) < 1e-3
+
+
+def test_lost_beam_falls_back_to_three_beams_and_says_so():
+    case = simulate(noise_free(get_scenario("pool_m1")), seed=6)
+    bt = case.pings.bt_radial_m_s.copy()
+    bt[3, 1] = np.nan
+    bt[5, :2] = np.nan
+    case = case.replace(pings=dataclasses.replace(case.pings, bt_radial_m_s=bt))
+    out = dynamic_correction(case, "rootfinder", truth_calibration(case))
+    assert out.beams_used[3] == 3 and out.beams_used[5] == 2
+    assert np.all(np.isfinite(out.vessel_velocity_m_s[3])) and np.all(np.isnan(out.vessel_velocity_m_s[5]))
+    assert np.isnan(out.error_velocity_m_s[3])
+
+
+def test_methods_need_a_calibration_and_a_known_name():
+    case = simulate(get_scenario("pool_m1"), seed=1)
+    with pytest.raises(ValueError, match="calibration"):
+        dynamic_correction(case, "adc")
+    with pytest.raises(ValueError, match="method"):
+        dynamic_correction(case, "magic", truth_calibration(case))
+    with pytest.raises(ValueError, match="null"):
+        dynamic_correction(case, "adc", {"radius_vectors_head_m": [[None] * 3] * 4})
+
+
+def test_compare_and_correct_from_the_command_line(tmp_path, capsys):
+    m0, m1, calib = tmp_path / "m0.h5", tmp_path / "m1.h5", tmp_path / "calib.json"
+    assert main(["simulate", "pool_m0", "--seed", "1", "--out", str(m0)]) == 0
+    assert main(["simulate", "pool_m1", "--seed", "1", "--out", str(m1)]) == 0
+    assert main(["calibrate", str(m0), "--starts", "2", "--out", str(calib)]) == 0
+    assert main(["correct", str(m1), "--method", "adc", "--calibration", str(calib), "--out", str(tmp_path / "o.h5")]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(m1), "--calibration", str(calib), "--out", str(tmp_path / "cmp")]) == 0
+    table = capsys.readouterr().out
+    for method in ("asc", "adc", "paper_literal", "rootfinder", "oracle", "truth"):
+        assert method in table
+    assert (tmp_path / "cmp" / "pool_m1_compare.png").exists()
