@@ -17,7 +17,9 @@ says so in ``beams_used``. ``paper_literal`` is Eqs. 79-81 and 94 as printed: be
 3, 4 and the frame-mixing Omega r. ``rootfinder`` solves the unmultiplied four-beam equations
 exactly per ping (:mod:`adcpdyn.solvers.rootfinder`). ``oracle`` is that exact solve
 with the true attitude, lever arms and installation angles of a simulated case: the
-floor the others are judged against. Water cells (Eq. 98) are left to a later change.
+floor the others are judged against. Water cells are corrected the same way from Eq. 88 multiplied out (Eq. 95,
+four beams by least squares; the paper's Eq. 98 uses three) with the corrected vessel
+velocity.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from .attitude_fit import fit_attitude
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
 
 
-def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str):
+def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str, timing: str = "deep"):
     """A (N, 4, 3) and b (N, 4) of Eq. 89 for every ping and beam, and the beam geometry."""
     t = case.pings.time_s
     N = t.size
@@ -63,7 +65,7 @@ def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangen
     depth = case.environment.depth_at_pings(N)[:, None]
     v_meas = case.pings.bt_radial_m_s
     l = (depth - z_T) / d_T[..., 2] * (1 - np.nan_to_num(v_meas) / c)  # Eq. 67, moving transducer
-    t_R = t[:, None] + 2 * l / c  # Eq. 68
+    t_R = t[:, None] + (2 * l / c if timing == "deep" else np.zeros_like(l))  # Eq. 68; "shallow": no flight
     rx_flat = evaluate_attitude(attitude, t_R.reshape(-1))
     rx = {k: v.reshape((N, 4) + v.shape[1:]) for k, v in rx_flat.items()}
     d_R, u_R, _ = beams(rx, 2)
@@ -71,6 +73,47 @@ def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangen
     A = d_R + rho[..., None] * d_T
     b = (rho - 1) * c - (u_R + rho * u_T)
     return {"A": A, "b": b, "d_T": d_T, "d_R": d_R, "u_T": u_T, "u_R": u_R}
+
+
+def _water(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, vessel_velocity, tangential: str, timing: str):
+    """Water velocity per ping and cell from Eq. 88 multiplied out (Eq. 95), four beams.
+
+    With rho_n = f_n / f0 from the measured relative water radial (Eq. 85 in instrument
+    sign), u the transducer's velocity along the beam at transmit (T) and at the cell's
+    receive time (R, Eqs. 86-87) and d_T, d_R the beam directions then:
+        V_n . [rho_n (c - u_T) d_R + (c + u_R) d_T] = c [(c + u_R) - rho_n (c - u_T)]
+    """
+    t = case.pings.time_s
+    N = t.size
+    cells = case.water.cell_depth_m
+    K = cells.size
+    c = case.instrument.sound_speed_m_s
+    B = case.instrument.beam_directions()
+    Lst = np.asarray(euler_matrix(*ypr_st))
+    r = np.asarray(lever_arms_s, dtype=float)
+    tx = evaluate_attitude(attitude, t)
+    d_T = np.einsum("nij,kj->nki", tx["Lambda"] @ Lst, B)
+    tang = "dLambda_dt" if tangential == "consistent" else "Omega"
+    u_T = np.sum((np.einsum("nij,kj->nki", tx[tang], r) + vessel_velocity[:, None, :]) * d_T, axis=-1)  # (N, 4)
+    g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
+    z_T = g_depth + np.einsum("nj,kj->nk", tx["Lambda"][:, 2, :], r)
+    l = (cells[None, None, :] - z_T[..., None]) / d_T[..., 2][..., None]  # Eq. 86, (N, 4, K)
+    t_R = t[:, None, None] + (2 * l / c if timing == "deep" else np.zeros_like(l))  # Eq. 87
+    rx_flat = evaluate_attitude(attitude, t_R.reshape(-1))
+    L_R = rx_flat["Lambda"].reshape(N, 4, K, 3, 3)
+    T_R = rx_flat[tang].reshape(N, 4, K, 3, 3)
+    beam = np.broadcast_to(B[None, :, None, :], (N, 4, K, 3))
+    d_R = np.einsum("nkcij,nkcj->nkci", L_R @ Lst, beam)
+    v_tan_R = np.einsum("nkcij,kj->nkci", T_R, r)
+    u_R = np.sum((v_tan_R + vessel_velocity[:, None, None, :]) * d_R, axis=-1)  # (N, 4, K)
+    rho = ratio_from_radial(case.water.radial_m_s, c)  # (N, 4, K)
+    uT = u_T[..., None]
+    A = rho[..., None] * (c - uT)[..., None] * d_R + (c + u_R)[..., None] * d_T[:, :, None, :]
+    b = c * ((c + u_R) - rho * (c - uT))
+    A = A.transpose(0, 2, 1, 3).reshape(N * K, 4, 3) / (2 * c)  # per (ping, cell): ~ d, radial units
+    b = b.transpose(0, 2, 1).reshape(N * K, 4) / (2 * c)
+    V, _, _ = _solve(A, b, B, [True] * 4)
+    return V.reshape(N, K, 3)
 
 
 def _solve(A, b, beam_dirs_t, beams_allowed):
@@ -127,7 +170,7 @@ def lever_arms_from_calibration(calibration: dict, case: Case) -> tuple[np.ndarr
 
 
 def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None = None,
-                       attitude: AttitudeParams | None = None) -> Correction:
+                       attitude: AttitudeParams | None = None, timing: str = "deep") -> Correction:
     """Correct every ping of a case (see module docstring).
 
     Parameters
@@ -139,7 +182,12 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
         Contents of CALIB.json (lever arms, installation angles); not used by ``oracle``.
     attitude : AttitudeParams, optional
         Attitude model of this run in the sensor frame (default: fitted to its samples).
+    timing : str
+        ``deep`` (transmit and receive at their own times, Eqs. 66-70) or ``shallow``
+        (the paper's shallow-water approximation: the round trip taken as instantaneous).
     """
+    if timing not in ("deep", "shallow"):
+        raise ValueError(f"timing: expected 'deep' or 'shallow', got {timing!r}")
     if method not in METHODS:
         raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
     if method == "oracle":
@@ -153,11 +201,14 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"
-    geo = _geometry(case, attitude, lever, ypr_st, tangential)
+    geo = _geometry(case, attitude, lever, ypr_st, tangential, timing)
     allowed = [False, True, True, True] if method == "paper_literal" else [True] * 4
     V, err, n_good = _solve(geo["A"], geo["b"], case.instrument.beam_directions(), allowed)
     if method in ("rootfinder", "oracle"):
         V, err = _rootfind(case, geo, V, err, n_good)
+    water = None
+    if case.water is not None:
+        water = _water(case, attitude, lever, ypr_st, V, tangential, timing)
     return Correction(method=method, time_s=case.pings.time_s.copy(), vessel_velocity_m_s=V, error_velocity_m_s=err,
-                      beams_used=n_good, attrs={"lever_arms_sensor_m": np.asarray(lever).tolist(),
-                                                "installation_ypr_rad": np.asarray(ypr_st).tolist()})
+                      beams_used=n_good, water_velocity_m_s=water, attrs={"lever_arms_sensor_m": np.asarray(lever).tolist(),
+                                                "installation_ypr_rad": np.asarray(ypr_st).tolist(), "timing": timing})

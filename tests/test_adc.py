@@ -85,3 +85,29 @@ def test_compare_and_correct_from_the_command_line(tmp_path, capsys):
     for method in ("asc", "adc", "paper_literal", "rootfinder", "oracle", "truth"):
         assert method in table
     assert (tmp_path / "cmp" / "pool_m1_compare.png").exists()
+
+
+def test_deep_ocean_timing_matters_and_rootfinder_reaches_the_oracle():
+    sc = get_scenario("deep_ocean")
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=200.0, water=None))
+    case = simulate(sc, seed=3)
+    calib, truth = truth_calibration(case), case.truth.vessel_velocity_m_s
+    rms = lambda c: np.sqrt(np.nanmean(np.sum((c.vessel_velocity_m_s - truth) ** 2, axis=1)))
+    shallow = rms(dynamic_correction(case, "adc", calib, timing="shallow"))
+    rootfinder = rms(dynamic_correction(case, "rootfinder", calib))
+    oracle = rms(dynamic_correction(case, "oracle"))
+    assert rootfinder <= 0.5 * shallow
+    assert rootfinder <= 1.1 * oracle
+
+
+def test_water_profile_no_rotation_limit():
+    from adcpdyn.models.motion import AttitudeParams
+
+    sc = noise_free(get_scenario("deep_ocean"))
+    still = AttitudeParams.from_axis_modes([], 0.0, [], 0.0, [0.3])
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, motion=still, duration_s=20.0))
+    case = simulate(sc, seed=1)
+    out = dynamic_correction(case, "rootfinder", truth_calibration(case))
+    ok = np.isfinite(out.water_velocity_m_s[..., 0])
+    assert ok.mean() > 0.5
+    assert np.max(np.abs(out.water_velocity_m_s[ok] - case.truth.water_velocity_m_s[ok])) < 1e-6
