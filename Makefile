@@ -21,6 +21,7 @@ test: $(STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
+	$(VENV)/bin/adcpdyn bench correction --quick --out benchmarks/results
 	$(VENV)/bin/adcpdyn bench calibration --quick --out benchmarks/results
 
 clean:

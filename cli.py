@@ -335,7 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_compare_formulations)
 
     s = sub.add_parser("bench", help="benchmarks with their targets")
-    s.add_argument("suite", help="calibration")
+    s.add_argument("suite", help="calibration | correction")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results")
     s.set_defaults(func=cmd_bench)

@@ -16,7 +16,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-SUITES = ("calibration",)
+SUITES = ("calibration", "correction")
 
 
 def _machine() -> dict:
@@ -134,11 +134,73 @@ def print_calibration(res: dict) -> None:
     res["targets"] = [{"target": label, "value": float(value), "met": bool(ok)} for label, value, ok in targets]
 
 
+def _tiled_case(base, n_pings: int):
+    """``base``'s pings repeated back to back until there are n_pings (throughput only)."""
+    import dataclasses
+
+    reps = int(np.ceil(n_pings / base.pings.n))
+    span = base.pings.time_s[-1] - base.pings.time_s[0] + np.median(np.diff(base.pings.time_s))
+    t = (base.pings.time_s[None, :] + span * np.arange(reps)[:, None]).reshape(-1)[:n_pings]
+    bt = np.tile(base.pings.bt_radial_m_s, (reps, 1))[:n_pings]
+    pings = dataclasses.replace(base.pings, time_s=t, bt_radial_m_s=bt, bt_range_m=None)
+    return base.replace(pings=pings, water=None, truth=None)
+
+
+def bench_correction(sizes) -> dict:
+    """Pings per second of asc, adc and rootfinder on the same tiled cases, in one run."""
+    from ..cases.scenario import get_scenario
+    from ..estimators.adc import dynamic_correction
+    from ..estimators.asc import asc
+    from ..estimators.attitude_fit import fit_attitude
+    from ..models.rotations import euler_matrix
+    from ..models.simulator import simulate
+
+    base = simulate(get_scenario("pool_m1"), seed=1)
+    attitude = fit_attitude(base).params
+    t = base.truth
+    calib = {"radius_vectors_head_m": (t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))).tolist()}
+    rows = []
+    for n in sizes:
+        case = _tiled_case(base, n)
+        row = {"n_pings": n}
+        for method in ("asc", "adc", "rootfinder"):
+            tic = time.perf_counter()
+            if method == "asc":
+                asc(case)
+            else:
+                dynamic_correction(case, method, calib, attitude=attitude)
+            row[f"{method}_pings_per_s"] = n / (time.perf_counter() - tic)
+        row["rootfinder_over_adc"] = row["rootfinder_pings_per_s"] / row["adc_pings_per_s"]
+        rows.append(row)
+    return {"suite": "correction", "machine": _machine(), "rows": rows}
+
+
+def print_correction(res: dict) -> None:
+    print("correction throughput (pings per second, same run; attitude model given, as after its fit)")
+    print(f"{'pings':>10}{'asc':>14}{'adc':>14}{'rootfinder':>14}{'rf / adc':>10}")
+    for r in res["rows"]:
+        print(f"{r['n_pings']:>10d}{r['asc_pings_per_s']:>14.0f}{r['adc_pings_per_s']:>14.0f}"
+              f"{r['rootfinder_pings_per_s']:>14.0f}{r['rootfinder_over_adc']:>10.2f}")
+    big = res["rows"][-1]
+    targets = [("rootfinder throughput >= closed form's (ratio >= 1.0) at the largest size", big["rootfinder_over_adc"],
+                big["rootfinder_over_adc"] >= 1.0),
+               ("rootfinder >= 1e6 pings/s at the largest size", big["rootfinder_pings_per_s"],
+                big["rootfinder_pings_per_s"] >= 1e6)]
+    print("\ntargets")
+    for label, value, ok in targets:
+        print(f"  [{'met' if ok else 'NOT met'}] {label}: {value:.4g}")
+    res["targets"] = [{"target": label, "value": float(value), "met": bool(ok)} for label, value, ok in targets]
+
+
 def run(suite: str, quick: bool, out_dir: Path) -> dict:
     if suite not in SUITES:
         raise ValueError(f"suite: expected one of {list(SUITES)}, got {suite!r}")
-    res = bench_calibration(seeds=5 if quick else 20, starts=8, deep_seeds=1 if quick else 3)
-    print_calibration(res)
+    if suite == "calibration":
+        res = bench_calibration(seeds=5 if quick else 20, starts=8, deep_seeds=1 if quick else 3)
+        print_calibration(res)
+    else:
+        res = bench_correction([10**3, 10**4, 10**5] if quick else [10**3, 10**4, 10**5, 10**6])
+        print_correction(res)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"{suite}.json"
     from ..estimators.calibration import _jsonable
