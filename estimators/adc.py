@@ -39,36 +39,43 @@ from .attitude_fit import fit_attitude
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
 
 
+def _beam_state(attitude: AttitudeParams, times: np.ndarray, Lst, B, r, tangential: str):
+    """Beam directions d (..., 3), tangential velocities (..., 3) and Lambda at ``times``.
+
+    ``times`` is (N, 1) (one time per ping, all beams), (N, 4) or (N, 4, K): beams along
+    axis 1. Directions d_i = Lambda Lambda_st b_i (Eqs. 26-29), tangential velocity
+    dLambda/dt r_i (Eq. 24), or Omega r_i when ``tangential="paper_literal"``.
+    """
+    flat = evaluate_attitude(attitude, times.reshape(-1))
+    Lam = flat["Lambda"].reshape(times.shape + (3, 3))
+    tang = flat["dLambda_dt" if tangential == "consistent" else "Omega"].reshape(times.shape + (3, 3))
+    shape = (1, 4) + (1,) * (times.ndim - 2) + (3, 1)
+    d = ((Lam @ Lst) @ B.reshape(shape))[..., 0]
+    v = (tang @ r.reshape(shape))[..., 0]
+    return d, v, Lam
+
+
+def _transducer_depths(case: Case, Lam_T: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Depth of each transducer at transmit, (N, 4) (Eq. 66); G sits below the level head by r_z."""
+    g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
+    return g_depth + np.einsum("nj,kj->nk", Lam_T[:, 0, 2, :], r)
+
+
 def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str, timing: str = "deep"):
     """A (N, 4, 3) and b (N, 4) of Eq. 89 for every ping and beam, and the beam geometry."""
     t = case.pings.time_s
-    N = t.size
     c = case.instrument.sound_speed_m_s
     B = case.instrument.beam_directions()
     Lst = np.asarray(euler_matrix(*ypr_st))
     r = np.asarray(lever_arms_s, dtype=float)
-    tx = evaluate_attitude(attitude, t)
-
-    def beams(state, n_leading):
-        L = state["Lambda"]
-        d = np.einsum("...ij,kj->...ki", L @ Lst, B) if n_leading == 1 else np.einsum("...ij,...j->...i", L @ Lst, B)
-        tang = state["dLambda_dt"] if tangential == "consistent" else state["Omega"]
-        if n_leading == 1:
-            v = np.einsum("nij,kj->nki", tang, r)
-        else:
-            v = np.einsum("...ij,...j->...i", tang, r)
-        return d, np.sum(v * d, axis=-1), L
-
-    d_T, u_T, L_T = beams(tx, 1)  # (N, 4, 3), (N, 4)
-    g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
-    z_T = g_depth + np.einsum("nj,kj->nk", L_T[:, 2, :], r)  # Eq. 66
-    depth = case.environment.depth_at_pings(N)[:, None]
+    d_T, w_T, Lam_T = _beam_state(attitude, t[:, None], Lst, B, r, tangential)
+    u_T = np.sum(w_T * d_T, axis=-1)  # (N, 4)
+    depth = case.environment.depth_at_pings(t.size)[:, None]
     v_meas = case.pings.bt_radial_m_s
-    l = (depth - z_T) / d_T[..., 2] * (1 - np.nan_to_num(v_meas) / c)  # Eq. 67, moving transducer
+    l = (depth - _transducer_depths(case, Lam_T, r)) / d_T[..., 2] * (1 - np.nan_to_num(v_meas) / c)  # Eq. 67
     t_R = t[:, None] + (2 * l / c if timing == "deep" else np.zeros_like(l))  # Eq. 68; "shallow": no flight
-    rx_flat = evaluate_attitude(attitude, t_R.reshape(-1))
-    rx = {k: v.reshape((N, 4) + v.shape[1:]) for k, v in rx_flat.items()}
-    d_R, u_R, _ = beams(rx, 2)
+    d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential)
+    u_R = np.sum(w_R * d_R, axis=-1)
     rho = ratio_from_radial(v_meas, c)
     A = d_R + rho[..., None] * d_T
     b = (rho - 1) * c - (u_R + rho * u_T)
@@ -91,21 +98,12 @@ def _water(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, vessel_ve
     B = case.instrument.beam_directions()
     Lst = np.asarray(euler_matrix(*ypr_st))
     r = np.asarray(lever_arms_s, dtype=float)
-    tx = evaluate_attitude(attitude, t)
-    d_T = np.einsum("nij,kj->nki", tx["Lambda"] @ Lst, B)
-    tang = "dLambda_dt" if tangential == "consistent" else "Omega"
-    u_T = np.sum((np.einsum("nij,kj->nki", tx[tang], r) + vessel_velocity[:, None, :]) * d_T, axis=-1)  # (N, 4)
-    g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
-    z_T = g_depth + np.einsum("nj,kj->nk", tx["Lambda"][:, 2, :], r)
-    l = (cells[None, None, :] - z_T[..., None]) / d_T[..., 2][..., None]  # Eq. 86, (N, 4, K)
+    d_T, w_T, Lam_T = _beam_state(attitude, t[:, None], Lst, B, r, tangential)
+    u_T = np.sum((w_T + vessel_velocity[:, None, :]) * d_T, axis=-1)  # (N, 4)
+    l = (cells[None, None, :] - _transducer_depths(case, Lam_T, r)[..., None]) / d_T[..., 2][..., None]  # Eq. 86
     t_R = t[:, None, None] + (2 * l / c if timing == "deep" else np.zeros_like(l))  # Eq. 87
-    rx_flat = evaluate_attitude(attitude, t_R.reshape(-1))
-    L_R = rx_flat["Lambda"].reshape(N, 4, K, 3, 3)
-    T_R = rx_flat[tang].reshape(N, 4, K, 3, 3)
-    beam = np.broadcast_to(B[None, :, None, :], (N, 4, K, 3))
-    d_R = np.einsum("nkcij,nkcj->nkci", L_R @ Lst, beam)
-    v_tan_R = np.einsum("nkcij,kj->nkci", T_R, r)
-    u_R = np.sum((v_tan_R + vessel_velocity[:, None, None, :]) * d_R, axis=-1)  # (N, 4, K)
+    d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential)  # (N, 4, K, 3)
+    u_R = np.sum((w_R + vessel_velocity[:, None, None, :]) * d_R, axis=-1)  # (N, 4, K)
     rho = ratio_from_radial(case.water.radial_m_s, c)  # (N, 4, K)
     uT = u_T[..., None]
     A = rho[..., None] * (c - uT)[..., None] * d_R + (c + u_R)[..., None] * d_T[:, :, None, :]
