@@ -27,6 +27,7 @@ The parameters of a model live in one flat vector laid out by
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import casadi as ca
@@ -264,16 +265,35 @@ def stack_matrices(block: np.ndarray, n: int) -> np.ndarray:
     return np.asarray(block).reshape(3, n, 3).transpose(1, 0, 2)
 
 
+EVAL_CHUNK = 8192
+
+
+@functools.lru_cache(maxsize=32)
+def _mapped_attitude(layout: AttitudeLayout, n: int) -> ca.Function:
+    return attitude_function(layout).map(n)
+
+
 def evaluate_attitude(params: AttitudeParams, times) -> dict[str, np.ndarray]:
-    """Numeric attitude at many times: ypr (n,3), Lambda, dLambda_dt, Omega (n,3,3), omega (n,3)."""
+    """Numeric attitude at many times: ypr (n,3), Lambda, dLambda_dt, Omega (n,3,3), omega (n,3).
+
+    Evaluated in chunks through one cached mapped Function per layout (building a map
+    over n costs O(n), so it is built once per chunk size, not per call).
+    """
     times = np.asarray(times, dtype=float).reshape(-1)
     n = times.size
-    fun = attitude_function(params.layout).map(n)
-    ypr, Lam, dLam, Om, om = fun(times[None, :], params.pack())
+    p = params.pack()
+    parts = []
+    for start in range(0, n, EVAL_CHUNK):
+        chunk = times[start:start + EVAL_CHUNK]
+        size = EVAL_CHUNK if n > EVAL_CHUNK else n
+        padded = np.pad(chunk, (0, size - chunk.size), mode="edge")
+        parts.append([o.full() for o in _mapped_attitude(params.layout, size)(padded[None, :], p)])
+    cat = lambda k, rows: np.concatenate([part[k] for part in parts], axis=1)[:, : n * rows]
+    out = [cat(0, 1), cat(1, 3), cat(2, 3), cat(3, 3), cat(4, 1)]
     return {
-        "ypr": np.asarray(ypr).T,
-        "Lambda": stack_matrices(Lam, n),
-        "dLambda_dt": stack_matrices(dLam, n),
-        "Omega": stack_matrices(Om, n),
-        "omega": np.asarray(om).T,
+        "ypr": out[0].T,
+        "Lambda": stack_matrices(out[1], n),
+        "dLambda_dt": stack_matrices(out[2], n),
+        "Omega": stack_matrices(out[3], n),
+        "omega": out[4].T,
     }

@@ -270,3 +270,14 @@ def test_cs_form_is_the_papers_eq34_and_converts_back(amplitude, t0, omega, deca
     again = np.asarray(ca.Function("h", [], [damped_mode(ca.DM(t), a2, t02, omega, decay)])()["o0"]).ravel()
     assert np.allclose(again, paper, atol=1e-12)
     assert abs(t02 - t_ref) <= np.pi / omega + 1e-12
+
+
+def test_chunked_attitude_evaluation_matches_single_calls():
+    from adcpdyn.models.motion import EVAL_CHUNK
+
+    t = np.linspace(0, 50, 2 * EVAL_CHUNK + 17)
+    many = evaluate_attitude(TWO_AXES, t)
+    pick = [0, EVAL_CHUNK - 1, EVAL_CHUNK, 2 * EVAL_CHUNK + 16]
+    few = evaluate_attitude(TWO_AXES, t[pick])
+    for key in ("ypr", "Lambda", "dLambda_dt"):
+        assert np.array_equal(many[key][pick], few[key])
