@@ -144,6 +144,15 @@ class Run:
     water: WaterProfile | None = None
     noise: Noise = field(default_factory=Noise)
     doppler: DopplerModel = field(default_factory=DopplerModel)
+    effects: tuple = ()  # ({"name": effect, "params": {...}}, ...) injected beyond the base model
+
+    def __post_init__(self):
+        from ..models.effects import get_effect
+
+        for spec in self.effects:
+            if not isinstance(spec, dict) or set(spec) != {"name", "params"}:
+                raise ValueError(f"runs.{self.name}.effects: expected tables with keys name and params, got {spec!r}")
+            get_effect(spec["name"])
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ import numpy as np
 from ..cases.case import Attitude, Case, Environment, Instrument, Pings, Reference, Truth, Water
 from ..cases.scenario import Scenario
 from .doppler import bottom_echo_ratio, radial_from_ratio, slant_range, water_echo_ratio
+from .effects import get_effect
 from .janus import janus_beam_directions, janus_transducer_positions
 from .kinematics import radius_vectors, transducer_state_function
 from .motion import attitude_function, stack_matrices
@@ -33,8 +34,9 @@ FIXED_POINT_ITERATIONS = 8
 class _Kinematics:
     """Numeric evaluation of the symbolic kinematics for one scenario."""
 
-    def __init__(self, scenario: Scenario):
+    def __init__(self, scenario: Scenario, effects=()):
         pf, run = scenario.platform, scenario.run
+        self.effects = effects
         self.params = run.motion
         self.p = run.motion.pack()
         self.attitude = attitude_function(run.motion.layout)
@@ -62,8 +64,14 @@ class _Kinematics:
                                                       self.installation_ypr, self.beam_dirs_t)
         beams = lambda m: np.asarray(m).reshape(4, n, 3).transpose(1, 0, 2).reshape(times.shape + (4, 3))
         mats = lambda m: stack_matrices(m, n).reshape(times.shape + (3, 3))
-        v_a = self.navigation.velocity(flat, self.heading_trend).reshape(times.shape + (3,))
-        G = self.track.position(flat).reshape(times.shape + (3,))
+        v_a = self.navigation.velocity(flat, self.heading_trend)
+        G = self.track.position(flat)
+        for effect, params in self.effects:  # effects that move G (surge, heave)
+            dv = effect.vessel_velocity_offset(flat, self.heading_trend(flat), params)
+            dG = effect.g_position_offset(flat, params)
+            v_a = v_a if dv is None else v_a + dv
+            G = G if dG is None else G + dG
+        v_a, G = v_a.reshape(times.shape + (3,)), G.reshape(times.shape + (3,))
         return {
             "Lambda": mats(Lam),
             "dLambda_dt": mats(dLam),
@@ -120,10 +128,17 @@ def _echo(kin: _Kinematics, scenario: Scenario, t_T, tx, target_depth, c_true):
 
 
 def simulate(scenario: Scenario, seed: int = 0) -> Case:
-    """Simulate one run of a scenario; the same seed gives the same case."""
+    """Simulate one run of a scenario; the same seed gives the same case.
+
+    The run's ``effects`` (names of :mod:`adcpdyn.models.effects` with their
+    parameters) are injected into the physics and the sensors, and listed in the truth.
+    """
     rng = np.random.default_rng(seed)
+    effects = [(get_effect(spec["name"]), dict(spec["params"])) for spec in scenario.run.effects]
+    for effect, params in effects:
+        scenario = effect.modify_scenario(scenario, params)
     pf, run, noise = scenario.platform, scenario.run, scenario.run.noise
-    kin = _Kinematics(scenario)
+    kin = _Kinematics(scenario, effects)
     c_inst = pf.instrument.sound_speed_m_s
     c_true = run.true_sound_speed_m_s or c_inst
     t_end = run.t_start_s + run.duration_s
@@ -133,8 +148,13 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
     N = t_T.size
     tx = kin.at(t_T)
     depth = np.full(N, run.water_depth_m)
-    u_tx, u_rx, _, _, t_R, _ = _echo(kin, scenario, t_T, tx, depth[:, None], c_true)
-    ratio = bottom_echo_ratio(u_tx, u_rx, c_true)
+    u_tx, u_rx, e_tx, e_rx, t_R, _ = _echo(kin, scenario, t_T, tx, depth[:, None], c_true)
+    v_bed = [b for b in (e.bottom_velocity(p) for e, p in effects) if b is not None]
+    if v_bed:  # a moving bottom is a moving scatterer (Eq. 88)
+        vb = np.sum(v_bed, axis=0)
+        ratio = water_echo_ratio(u_tx, u_rx, np.sum(e_tx * vb, axis=-1), np.sum(e_rx * vb, axis=-1), c_true)
+    else:
+        ratio = bottom_echo_ratio(u_tx, u_rx, c_true)
     bt = radial_from_ratio(ratio, c_inst)
     speed = np.linalg.norm(tx["velocity"], axis=-1)
     bt = bt + rng.normal(size=bt.shape) * np.hypot(noise.bt_m_s, noise.bt_fraction * speed)
@@ -168,8 +188,14 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         t_att = irregular_times(rng, run.t_start_s + rng.uniform(0, run.attitude_interval_s[0]), t_end, *run.attitude_interval_s)
     Lam_sym = ca.SX.sym("Lambda", 3, 3)
     sense = ca.Function("sense", [Lam_sym], [sensed_attitude(Lam_sym, kin.installation_ypr, pf.mounting.attitude_frame)])
-    att_kin = kin.at(t_att)
-    ypr = np.asarray(sense.map(t_att.size)(att_kin["Lambda"].transpose(1, 0, 2).reshape(3, -1))).T
+
+    def read(times):
+        lam = kin.at(times)["Lambda"]
+        return np.asarray(sense.map(times.size)(lam.transpose(1, 0, 2).reshape(3, -1))).T
+
+    for effect, params in effects:  # latency, low-pass, compass deviation
+        read = effect.wrap_attitude_sensor(read, params)
+    ypr = read(t_att)
     ypr = ypr + rng.normal(size=ypr.shape) * np.array([noise.heading_rad, noise.tilt_rad, noise.tilt_rad])
     ypr = quantise(ypr, noise.attitude_resolution_rad)
     attitude = Attitude(t_att, wrap_heading(ypr[:, 0]), ypr[:, 1], ypr[:, 2], frame=pf.mounting.attitude_frame)
@@ -193,7 +219,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         installation_ypr_rad=kin.installation_ypr.copy(),
         vessel_velocity_m_s=tx["vessel_velocity"].copy(),
         water_velocity_m_s=water_truth,
-        effects=[],
+        effects=[{"name": e.name, "params": p} for e, p in effects],
         extra_attrs={
             "attitude_model": json.dumps(run.motion.to_dict()),
             "doppler_model": json.dumps(asdict(run.doppler)),
@@ -202,7 +228,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
             "true_sound_speed_m_s": repr(float(c_true)),
         },
     )
-    return Case(
+    case = Case(
         name=scenario.name,
         description=f"{run.description} (simulated by adcpdyn, seed {seed})".strip(),
         instrument=Instrument(
@@ -219,4 +245,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         reference=reference,
         truth=truth,
     )
+    for effect, params in effects:  # what the instrument records (nominal values)
+        case = effect.record(case, params)
+    return case
 

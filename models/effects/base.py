@@ -1,0 +1,131 @@
+"""What every effect of the catalog provides: simulator injection and model extension.
+
+An effect is one physical cause of disagreement between the base model and a run.
+It is *injected* by the simulator (numeric hooks on the exact physics, never the
+estimator's shortcut) and *added* to the estimation model as extra unknowns
+(symbolic hooks on CasADi expressions). Every hook defaults to "no change", so an
+effect module overrides only the hooks it touches; adding an effect is adding a
+module and listing it in :mod:`adcpdyn.models.effects`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One unknown of an effect: name with unit, scale, bounds, and the self-test's draw range."""
+
+    name: str
+    scale: float
+    lower: float
+    upper: float
+    draw: tuple = (0.0, 0.0)  # |value| drawn uniformly in this range, random sign when signed
+    signed: bool = True
+
+
+class Effect:
+    """Base class: no-op hooks. Subclasses set ``name``, ``description``, ``parameters``."""
+
+    name: str = ""
+    description: str = ""
+    parameters: tuple = ()
+    timing: str | None = None  # "deep" when the effect is the two-way timing itself
+    needs_reference: bool = False  # observable only with a moving reference velocity
+    needs_rotation: bool = False
+
+    # ------------------------------------------------------------ parameters
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.parameters]
+
+    def draw(self, rng: np.random.Generator) -> dict:
+        """Random realistic magnitudes for the blind self-test."""
+        out = {}
+        for p in self.parameters:
+            v = rng.uniform(*p.draw)
+            out[p.name] = float(v * rng.choice([-1.0, 1.0]) if p.signed else v)
+        return out
+
+    def vector(self, params: dict) -> np.ndarray:
+        missing = [n for n in self.names if n not in params]
+        if missing:
+            raise ValueError(f"effect {self.name}: missing parameter(s) {missing}; expected {self.names}")
+        return np.array([float(params[n]) for n in self.names])
+
+    def initial(self, ctx) -> np.ndarray:
+        """Start of the refit (warm start from the base fit: the effect switched off)."""
+        return np.zeros(len(self.parameters))
+
+    # ------------------------------------------------------------ simulation (numeric)
+    def modify_scenario(self, scenario, params: dict):
+        """The scenario whose exact physics contains the effect."""
+        return scenario
+
+    def vessel_velocity_offset(self, t, heading, params: dict):
+        """Extra Earth velocity of G at times t (n,) with heading trend (n,) -> (n, 3)."""
+        return None
+
+    def g_position_offset(self, t, params: dict):
+        """Extra position of G (n, 3) (only its depth matters over a flat bottom)."""
+        return None
+
+    def bottom_velocity(self, params: dict):
+        """Velocity of the bottom under bottom tracking, (3,)."""
+        return None
+
+    def wrap_attitude_sensor(self, read, params: dict):
+        """``read(times) -> (n, 3) ypr`` of the sensor, wrapped by the effect."""
+        return read
+
+    def record(self, case, params: dict):
+        """What the instrument writes when it differs from the physics (nominal values)."""
+        return case
+
+    # ------------------------------------------------------------ estimation (symbolic)
+    # Each hook receives CasADi expressions and the effect's parameter vector th.
+    def attitude_time(self, t, th):
+        return t
+
+    def tilt_attitude_params(self, p_att, layout, th):
+        return p_att
+
+    def heading_reading(self, psi, th):
+        return psi
+
+    def beam_directions(self, beam_dirs_t, beam_angle_rad, th):
+        return beam_dirs_t
+
+    def installation(self, ypr_st, th):
+        return ypr_st
+
+    def radial_scale(self, th):
+        return 1.0
+
+    def range_scale(self, th):
+        return 1.0
+
+    def vessel_velocity(self, v, ctx, th):
+        """v (N, 3) navigation velocity at the ping times -> v."""
+        return v
+
+    def reference_velocity(self, v, ctx, th):
+        """v (L, 3) navigation velocity at the reference times -> v."""
+        return v
+
+    def g_depth(self, g_depth, ctx, th):
+        """G's depth per ping (1, N) -> (1, N)."""
+        return g_depth
+
+    def bottom_velocity_model(self, th):
+        return None
+
+    def reference_point(self, p_ref, th):
+        return p_ref
+
+    def extra_mode(self, th):
+        """(omega, decay, roll (C, S), pitch (C, S)) of an extra oscillation, or None."""
+        return None
