@@ -277,6 +277,59 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_diagnose(args) -> int:
+    if args.selftest:
+        return _diagnose_selftest(args)
+    if not args.case or not args.out:
+        raise ValueError("diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)")
+    from .cases.atomic import refuse_overwrite_input
+    from .estimators.diagnosis.diagnose import DiagnosisConfig, diagnose
+    from .estimators.diagnosis.report import table, write_report
+
+    refuse_overwrite_input(args.out, args.case, args.calibration)
+    case = _read(args.case)
+    calibration = None
+    if args.calibration:
+        with open(args.calibration) as fh:
+            calibration = json.load(fh)
+    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
+    result = diagnose(case, config, calibration=calibration)
+    paths = write_report(result, args.out)
+    print(table(result))
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0 if result.base["success"] else 1
+
+
+def _diagnose_selftest(args) -> int:
+    from tqdm import tqdm
+
+    from .cases.atomic import atomic_path
+    from .estimators.calibration import _jsonable
+    from .estimators.diagnosis.diagnose import DiagnosisConfig
+    from .estimators.diagnosis.selftest import draw_cases, format_summary, run_one, summarise
+
+    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
+    draws = draw_cases(args.selftest, args.seed, config.effects)
+    rows = []
+    for label, params, seed in tqdm(draws, desc="self-test", unit="case"):
+        rows.append(run_one(label, params, seed, args.scenario, config))
+        r = rows[-1]
+        tqdm.write(f"{r['truth']:>26s} -> {r['verdict']:<26s} gap {r['gap_before']:.3f} -> {r['gap_after']:.3f}  "
+                   f"where {r['where_top']}  ({r['seconds']:.0f} s)")
+    summary = summarise(rows, list(config.effects))
+    print(format_summary(summary))
+    if args.out:
+        with atomic_path(args.out) as tmp:
+            with open(tmp, "w") as fh:
+                json.dump(_jsonable({"seed": args.seed, "n": args.selftest, "scenario": args.scenario,
+                                     "config": {"effects": list(config.effects), "bic_margin": config.bic_margin,
+                                                "min_shrink": config.min_shrink, "gap_z": config.gap_z,
+                                                "min_gap": config.min_gap},
+                                     "summary": summary, "cases": rows}), fh, indent=2)
+        print(f"wrote {args.out}")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from .solvers.bench import run
 
@@ -333,6 +386,16 @@ def build_parser() -> argparse.ArgumentParser:
     calibration_options(s)
     s.add_argument("--out", help="optional JSON of the table")
     s.set_defaults(func=cmd_compare_formulations)
+
+    s = sub.add_parser("diagnose", help="where the sim-to-real gap lies, which unmodelled effect causes it, how far it shrinks")
+    s.add_argument("case", nargs="?", help="CASE.h5 (omit with --selftest)")
+    s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (start of the base fit)")
+    s.add_argument("--out", help="DIAG.json (DIAG.md and a figure are written beside it)")
+    s.add_argument("--effects", nargs="+", help="catalog effects to try (default: all)")
+    s.add_argument("--selftest", type=int, metavar="N", help="blind self-test on N simulated cases")
+    s.add_argument("--seed", type=int, default=0, help="seed of the self-test draws")
+    s.add_argument("--scenario", default="diag_boat", help="scenario the self-test simulates")
+    s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("bench", help="benchmarks with their targets")
     s.add_argument("suite", help="calibration | correction")

@@ -18,3 +18,6 @@ class AttitudeLatency(Effect):
 
     def attitude_time(self, t, th):
         return t - th[0]
+
+    def extra_starts(self):
+        return [{"attitude_latency.delay_s": 0.25}, {"attitude_latency.delay_s": -0.25}]

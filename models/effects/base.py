@@ -60,6 +60,17 @@ class Effect:
         """Start of the refit (warm start from the base fit: the effect switched off)."""
         return np.zeros(len(self.parameters))
 
+    def extra_starts(self) -> list[dict]:
+        """Further starts ({"effect.param": value}) where the refit has more than one basin."""
+        return []
+
+    def truth_values(self, params: dict) -> dict | None:
+        """The model's unknowns for injected ``params`` ({"effect.param": value}), or None
+        when the simulator's parameters are not the model's (then no oracle refit exists)."""
+        if set(params) != set(self.names):
+            return None
+        return {f"{self.name}.{n}": float(params[n]) for n in self.names}
+
     # ------------------------------------------------------------ simulation (numeric)
     def modify_scenario(self, scenario, params: dict):
         """The scenario whose exact physics contains the effect."""

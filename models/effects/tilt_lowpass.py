@@ -55,3 +55,6 @@ class TiltLowpass(Effect):
                 parts[base + 2 * k] = (c * a - sn * b) / den
                 parts[base + 2 * k + 1] = (c * b + sn * a) / den
         return ca.vertcat(*parts)
+
+    def extra_starts(self):
+        return [{"tilt_lowpass.tau_s": 0.3}]

@@ -1,0 +1,338 @@
+"""Sim-to-real gap diagnosis of one case: where the base model misses, which catalog
+effect explains it, and how far the held-out gap shrinks once that effect is added.
+
+1. Base fit (:class:`.model.GapModel` without effects), warm-started from the attitude
+   pre-fit (or a calibration).
+2. Noise levels per channel group: independent where the data allow (attitude from the
+   flexible pre-fit, bottom track from the four-beam error velocity), otherwise the
+   lowest residual level any fitted model reached.
+3. Each catalog effect refitted with the base fit as warm start; scored by the
+   likelihood ratio (profiled per-group noise), BIC and the chi-square p-value.
+4. The gap: excess chi-square per sample of residuals predicted on held-out time
+   blocks (one Gauss-Newton step from the full fit with the block left out), in units of
+   the noise levels: 0 when the model is as good as the noise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from ...cases.case import Case
+from ...models.effects import CATALOG, get_effect
+from ...models.motion import AttitudeParams, evaluate_attitude
+from ...solvers.multistart import SolverOptions
+from ..attitude_fit import fit_attitude
+from . import where as where_mod
+from .model import GROUPS, Fit, GapModel, base_attitude, group_of, initial_noise, residual_peaks
+
+INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt")
+
+
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """Which effects to try and when a difference counts.
+
+    An effect is significant when its BIC improves on the base model's by more than
+    ``bic_margin`` AND it removes at least ``min_shrink`` of the held-out gap. A gap is
+    significant when its z-score (excess chi-square over its null standard deviation)
+    exceeds ``gap_z`` and it exceeds ``min_gap`` (a practical floor: noise levels are
+    estimated, so a few percent of excess is not evidence).
+    """
+
+    effects: tuple = tuple(CATALOG)
+    cv_folds: int = 5
+    cv_blocks_per_fold: int = 6
+    bic_margin: float = 10.0
+    min_shrink: float = 0.25
+    gap_z: float = 6.0
+    min_gap: float = 0.1
+    max_modes: int = 3
+    solver: SolverOptions = SolverOptions(tol=1e-8, max_iter=200, hessian="gauss-newton", expand=False)
+
+    def __post_init__(self):
+        for name in self.effects:
+            get_effect(name)
+        if self.cv_folds < 2 or self.cv_blocks_per_fold < 1:
+            raise ValueError(f"cv_folds, cv_blocks_per_fold: expected integers >= 2 and >= 1, got "
+                             f"{self.cv_folds}, {self.cv_blocks_per_fold}")
+
+
+@dataclass
+class EffectScore:
+    effect: str
+    delta_ll: float
+    delta_bic: float
+    p_value: float
+    n_params: int
+    params: dict
+    params_se: dict
+    gap_after: float
+    shrink_fraction: float
+    velocity_error_m_s: float | None
+    success: bool
+    status: str
+    iterations: int
+    significant: bool = False
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class DiagnosisResult:
+    """What :func:`diagnose` found. ``verdict`` is an effect name or ``none``."""
+
+    case: str
+    verdict: str
+    statement: str
+    gap_before: float
+    gap_after: float
+    gap_z_before: float
+    gap_z_after: float
+    remaining_gap_significant: bool
+    where: list
+    ranking: list
+    noise: dict
+    base: dict
+    velocity_error_before_m_s: float | None
+    velocity_error_after_m_s: float | None
+    fits: dict = field(default_factory=dict, repr=False)  # name -> (GapModel, Fit), for figures
+    cv_residuals: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict:
+        d = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("fits", "cv_residuals")}
+        d["ranking"] = [r if isinstance(r, dict) else r.to_dict() for r in self.ranking]
+        return d
+
+
+# ---------------------------------------------------------------------------- numbers
+def _group_sigma(model: GapModel, raw: np.ndarray) -> dict:
+    out = {}
+    for g in model.groups_present:
+        m = (model.group_index == GROUPS.index(g)) & (model.mask > 0)
+        out[g] = float(np.sqrt(np.mean(raw[m] ** 2))) if m.any() else np.nan
+    return out
+
+
+def _cv_residuals(model: GapModel, fit: Fit, folds: int, blocks_per_fold: int) -> np.ndarray:
+    """Raw residuals of each held-out fold predicted by the fit with that fold left out.
+
+    The run is cut into ``folds * blocks_per_fold`` contiguous time blocks dealt to the
+    folds in turn (so a fold is spread over the run and slowly varying unknowns stay
+    determined). The leave-fold-out estimate is one Gauss-Newton step from the full fit,
+    damped by a millionth of the full-data information so a direction only the fold
+    determines stays put.
+    """
+    J = fit.jacobian
+    w = model.weights(fit.sigma)
+    e = w * fit.raw
+    t = model.times
+    edges = np.linspace(t.min(), t.max() + 1e-9, folds * blocks_per_fold + 1)
+    fold_of = (np.searchsorted(edges, t, side="right") - 1) % folds
+    damping = 1e-6 * np.maximum(np.sum(J**2, axis=0), 1e-12)
+    pred = np.zeros_like(e)
+    for k in range(folds):
+        out = fold_of == k
+        tr = ~out & (model.mask > 0)
+        Jt = J[tr]
+        step = -np.linalg.solve(Jt.T @ Jt + np.diag(damping), Jt.T @ e[tr])
+        pred[out] = e[out] + J[out] @ step
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
+
+
+def _gap(model: GapModel, raw: np.ndarray, sigma: dict) -> tuple[float, float]:
+    """Excess chi-square per sample and its z-score against the noise levels."""
+    m = model.mask > 0
+    s = np.array([sigma[GROUPS[g]] for g in model.group_index])
+    chi2 = float(np.mean((raw[m] / s[m]) ** 2))
+    n = int(m.sum())
+    return chi2 - 1.0, (chi2 - 1.0) * np.sqrt(n / 2.0)
+
+
+def _covariance_se(fit: Fit, model: GapModel) -> np.ndarray:
+    """Standard errors of the unknowns from the weighted Jacobian, scaled by the fit."""
+    J = fit.jacobian
+    m = int((model.mask > 0).sum())
+    dof = max(m - J.shape[1], 1)
+    s2 = 2.0 * fit.objective / dof
+    cov = np.linalg.pinv(J.T @ J, rcond=1e-12) * s2
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)) * fit.scale
+
+
+def _velocity_error(case: Case, model: GapModel, fit: Fit) -> float | None:
+    """RMS horizontal error of the per-ping velocity over ground corrected with the fitted model."""
+    if case.truth is None or case.truth.vessel_velocity_m_s is None:
+        return None
+    v = model.corrected_velocity(fit)
+    err = v[:, :2] - case.truth.vessel_velocity_m_s[:, :2]
+    ok = np.all(np.isfinite(err), axis=1)
+    return float(np.sqrt(np.mean(np.sum(err[ok] ** 2, axis=1)))) if ok.any() else None
+
+
+def _starting_nav(case: Case, att: AttitudeParams) -> np.ndarray:
+    ref = case.reference
+    if ref is None or ref.time_s is None or ref.velocity_m_s is None:
+        return np.zeros(4)
+    psi = evaluate_attitude(att, ref.time_s)["ypr"][:, 0]
+    v = np.nan_to_num(ref.velocity_m_s)
+    fwd = v[:, 0] * np.cos(psi) + v[:, 1] * np.sin(psi)
+    side = -v[:, 0] * np.sin(psi) + v[:, 1] * np.cos(psi)
+    return np.array([np.median(fwd), np.median(side), 0.0, 0.0])
+
+
+def applicable(case: Case, name: str) -> tuple[bool, str]:
+    e = get_effect(name)
+    ref = case.reference
+    moving = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
+    if e.needs_reference and not moving:
+        return False, "needs a moving reference velocity"
+    if name == "moving_bed" and not moving:
+        return False, "a moving bed is indistinguishable from vessel motion without a reference"
+    return True, ""
+
+
+# ---------------------------------------------------------------------------- main
+def fit_base(case: Case, config: DiagnosisConfig, calibration: dict | None = None):
+    af = fit_attitude(case, max_modes=config.max_modes)
+    att = base_attitude(af)
+    if calibration and calibration.get("attitude_model"):
+        att = base_attitude(dataclasses.replace(af, params=AttitudeParams.from_dict(calibration["attitude_model"])))
+    sigma0 = initial_noise(case, af)
+    model = GapModel(case, att, solver=config.solver)
+    centre = np.zeros(3)
+    if calibration and calibration.get("radius_vectors_m") is not None:
+        r = np.array(calibration["radius_vectors_m"], dtype=float)  # null (undetermined) -> nan
+        if np.all(np.isfinite(r)):
+            centre = np.mean(r, axis=0) - np.mean(case.instrument.transducer_positions(), axis=0)
+    x0 = model.start(model.x_base(att, centre, _starting_nav(case, att)))
+    fit = model.solve(x0, sigma0)
+    # second pass with the groups' noise levels re-estimated where no independent one exists
+    sigma = dict(sigma0)
+    rms = _group_sigma(model, fit.raw)
+    for g in model.groups_present:
+        if g not in INDEPENDENT_NOISE:
+            sigma[g] = max(rms[g], 1e-6)
+    fit = model.solve(fit.x, sigma)
+    return af, att, model, fit, sigma
+
+
+def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibration: dict | None = None,
+             progress=None) -> DiagnosisResult:
+    """Diagnose the gap between the base model and one case, blind to its truth."""
+    af, att, base_model, base, sigma_fit = fit_base(case, config, calibration)
+    peaks = residual_peaks(case, base.raw, base_model)
+    fits = {"base": (base_model, base)}
+    skipped = {}
+    for name in config.effects:
+        ok, why = applicable(case, name)
+        if not ok:
+            skipped[name] = why
+            continue
+        e = get_effect(name)
+        model = GapModel(case, att, [e], peaks, solver=config.solver)
+        starts = [model.start(base.x)] + [model.start(base.x, o) for o in e.extra_starts()]
+        best = None
+        for x0 in starts:
+            f = model.solve(x0, base.sigma)
+            if best is None or f.objective < best.objective:
+                best = f
+        fits[name] = (model, best)
+        if progress:
+            progress(name)
+
+    # noise levels: independent ones, lowered to the best level any model reached
+    noise = dict(sigma_fit)
+    for name, (model, f) in fits.items():
+        for g, v in _group_sigma(model, f.raw).items():
+            noise[g] = min(noise[g], v) if np.isfinite(v) else noise[g]
+    noise = {g: max(v, 1e-9) for g, v in noise.items()}
+
+    cv = {name: _cv_residuals(m, f, config.cv_folds, config.cv_blocks_per_fold) for name, (m, f) in fits.items()}
+    gap_before, z_before = _gap(base_model, cv["base"], noise)
+    ll0 = base.log_likelihood(base_model)
+    n_obs = int((base_model.mask > 0).sum())
+    v_before = _velocity_error(case, base_model, base)
+    ranking = []
+    for name, (model, f) in fits.items():
+        if name == "base":
+            continue
+        k = len(model.effect_index)
+        dll = f.log_likelihood(model) - ll0
+        dbic = -2.0 * dll + k * np.log(n_obs)
+        gap_after, _ = _gap(model, cv[name], noise)
+        shrink = (gap_before - gap_after) / gap_before if gap_before > 0 else 0.0
+        se = _covariance_se(f, model)
+        score = EffectScore(
+            effect=name, delta_ll=float(dll), delta_bic=float(dbic),
+            p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else (1.0 if dll <= 0 else 0.0),
+            n_params=k, params=f.effect_values(model),
+            params_se={n: float(se[i]) for n, i in zip(model.effect_names, model.effect_index)},
+            gap_after=float(gap_after), shrink_fraction=float(shrink),
+            velocity_error_m_s=_velocity_error(case, model, f),
+            success=f.success, status=f.status, iterations=f.iterations)
+        score.significant = bool(score.delta_bic < -config.bic_margin and shrink >= config.min_shrink
+                                 and gap_before > config.min_gap)
+        ranking.append(score)
+    ranking.sort(key=lambda s: (not s.significant, s.delta_bic))
+    best = ranking[0] if ranking and ranking[0].significant else None
+
+    where = _where(case, base_model, base, cv["base"], noise, att)
+    gap_sig_before = z_before > config.gap_z and gap_before > config.min_gap
+    if best is not None:
+        gap_after, z_after = _gap(fits[best.effect][0], cv[best.effect], noise)
+        remaining = z_after > config.gap_z and gap_after > config.min_gap
+        verdict = best.effect
+        statement = (f"{best.effect} explains the gap: held-out excess chi2 {gap_before:.3f} -> {gap_after:.3f} "
+                     f"(shrink {100 * best.shrink_fraction:.0f}%, delta BIC {best.delta_bic:.1f})")
+        if remaining:
+            statement += (f"; a significant gap remains after it (excess chi2 {gap_after:.3f}, z = {z_after:.1f}), "
+                          f"worst in {where[0]['channel']}: an effect outside the catalog, or more than one")
+    else:
+        gap_after, z_after, remaining, verdict = gap_before, z_before, gap_sig_before, "none"
+        if gap_sig_before:
+            statement = (f"no catalog effect is significant, but a significant gap remains (held-out excess chi2 "
+                         f"{gap_before:.3f}, z = {z_before:.1f}), worst in {where[0]['channel']} "
+                         f"({where[0]['detail']}): an effect outside the catalog")
+        else:
+            statement = f"no significant gap: the base model fits to the noise (held-out excess chi2 {gap_before:.3f})"
+    base_info = {"success": base.success, "status": base.status, "iterations": base.iterations,
+                 "log_likelihood": float(ll0), "n_observations": n_obs, "skipped_effects": skipped,
+                 "unknowns": dict(zip(base.names[: base_model.n_base], map(float, base.x[: base_model.n_base])))}
+    return DiagnosisResult(
+        case=case.name, verdict=verdict, statement=statement, gap_before=float(gap_before), gap_after=float(gap_after),
+        gap_z_before=float(z_before), gap_z_after=float(z_after), remaining_gap_significant=bool(remaining),
+        where=where, ranking=[r.to_dict() for r in ranking], noise=noise, base=base_info,
+        velocity_error_before_m_s=v_before,
+        velocity_error_after_m_s=best.velocity_error_m_s if best is not None else v_before,
+        fits=fits, cv_residuals=cv)
+
+
+def _where(case: Case, model: GapModel, fit: Fit, cv_raw: np.ndarray, noise: dict, att: AttitudeParams) -> list:
+    """Ranked channel reports of the base model's held-out residuals."""
+    n_att = att.layout.size
+    p = AttitudeParams.unpack(fit.x[:n_att], att.layout)
+    modes = [float(w) for w, _ in p.modes]
+    reports = []
+    for ch, sl in model.channel_slices().items():
+        m = model.mask[sl] > 0
+        if m.sum() < 3:
+            continue
+        t = model.times[sl][m]
+        dt = 0.05
+        ypr = [evaluate_attitude(p, t + k * dt)["ypr"] for k in (-1, 0, 1)]
+        rate = (ypr[2] - ypr[0]) / (2 * dt)
+        accel = (ypr[2] - 2 * ypr[1] + ypr[0]) / dt**2
+        reg = {"roll rate": rate[:, 2], "pitch rate": rate[:, 1], "yaw rate": rate[:, 0],
+               "roll acceleration": accel[:, 2], "pitch acceleration": accel[:, 1],
+               "sin heading": np.sin(ypr[1][:, 0]), "cos heading": np.cos(ypr[1][:, 0]),
+               "roll": ypr[1][:, 2], "pitch": ypr[1][:, 1], "time": t}
+        v = model.nav_at(fit.x, t)
+        reg["speed"] = np.hypot(v[:, 0], v[:, 1])
+        reg["depth"] = np.interp(t, case.pings.time_s, case.environment.depth_at_pings(case.pings.n))
+        reports.append(where_mod.channel_report(ch, t, cv_raw[sl][m], noise[group_of(ch)], reg, modes))
+    return where_mod.rank(reports)

@@ -1,0 +1,132 @@
+"""Sim-to-real gap diagnosis: catalog, held-out gap, residual statistics, verdicts."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from adcpdyn.cases.scenario import get_scenario
+from adcpdyn.estimators.diagnosis import where
+from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, _cv_residuals, diagnose
+from adcpdyn.estimators.diagnosis.selftest import oracle_shrink, with_effect
+from adcpdyn.models.effects import CATALOG, get_effect
+from adcpdyn.models.simulator import simulate
+
+ISSUE_EFFECTS = {"attitude_latency", "sound_speed_error", "beam_angle_error", "heave", "surge", "forced_roll",
+                 "compass_deviation", "tilt_lowpass", "moving_bed", "reference_lever_arm",
+                 "installation_misalignment", "deep_water_timing"}
+
+
+def short_scenario(seconds=60.0):
+    sc = get_scenario("diag_boat")
+    return dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=seconds))
+
+
+def test_catalog_holds_every_effect_of_the_issue():
+    assert ISSUE_EFFECTS <= set(CATALOG)
+    with pytest.raises(ValueError, match="effect"):
+        get_effect("no_such_effect")
+
+
+@pytest.mark.parametrize("name", sorted(ISSUE_EFFECTS))
+def test_each_effect_is_injected_and_recorded(name):
+    rng = np.random.default_rng(3)
+    params = get_effect(name).draw(rng)
+    case = simulate(with_effect(short_scenario(20.0), name, params), seed=3)
+    assert case.truth.effects == [{"name": name, "params": params}]
+    clean = simulate(short_scenario(20.0), seed=3)
+    # the effect changes what the instruments recorded (same noise seed otherwise)
+    changed = [not np.allclose(np.nan_to_num(getattr(case.pings, f)), np.nan_to_num(getattr(clean.pings, f)))
+               for f in ("bt_radial_m_s", "bt_range_m") if getattr(case.pings, f) is not None and
+               getattr(case.pings, f).shape == getattr(clean.pings, f).shape]
+    changed.append(not np.allclose(case.attitude.ypr(), clean.attitude.ypr()))
+    if case.reference is not None and case.reference.velocity_m_s is not None:
+        changed.append(not np.allclose(case.reference.velocity_m_s, clean.reference.velocity_m_s))
+    assert any(changed)
+
+
+def test_leave_fold_out_step_is_exact_for_a_linear_model():
+    """One Gauss-Newton step from the full fit = refitting without the fold (linear LS)."""
+    rng = np.random.default_rng(0)
+    n, p = 300, 4
+    t = np.linspace(0, 100, n)
+    A = np.column_stack([np.ones(n), t / 100, np.sin(t / 7), np.cos(t / 11)])
+    y = A @ rng.normal(size=p) + 0.1 * rng.normal(size=n)
+    x = np.linalg.lstsq(A, y, rcond=None)[0]
+    model = SimpleNamespace(times=t, mask=np.ones(n), weights=lambda sigma: np.ones(n))
+    fit = SimpleNamespace(jacobian=A, raw=A @ x - y, sigma={})
+    pred = _cv_residuals(model, fit, folds=4, blocks_per_fold=3)
+    edges = np.linspace(t.min(), t.max() + 1e-9, 13)
+    fold = (np.searchsorted(edges, t, side="right") - 1) % 4
+    for k in range(4):
+        tr = fold != k
+        xk = np.linalg.lstsq(A[tr], y[tr], rcond=None)[0]
+        np.testing.assert_allclose(pred[~tr], (A @ xk - y)[~tr], atol=1e-5)
+
+
+def test_channel_report_white_noise_and_a_sinusoid():
+    rng = np.random.default_rng(1)
+    t = np.sort(rng.uniform(0, 120, 600))
+    white = where.channel_report("roll", t, 0.01 * rng.normal(size=t.size), 0.01, {"time": t}, [2.0])
+    assert abs(white["chi2_per_sample"] - 1) < 0.2 and abs(white["score"]) < 4 and white["ljung_box_p"] > 1e-3
+    wave = 0.03 * np.sin(2.0 * t) + 0.01 * rng.normal(size=t.size)
+    rep = where.channel_report("roll", t, wave, 0.01, {"roll": np.sin(2.0 * t)}, [2.0])
+    assert rep["score"] > 20 and abs(rep["peak_rad_s"] - 2.0) < 0.05 and rep["peak_at"].startswith("mode")
+    assert "peak at 2.00 rad/s" in rep["detail"] and "correlates with roll (r = +0.9" in rep["detail"]
+
+
+FEW = ("attitude_latency", "sound_speed_error", "compass_deviation")
+
+
+@pytest.fixture(scope="module")
+def latency_diagnosis():
+    params = {"delay_s": 0.2}
+    case = simulate(with_effect(short_scenario(), "attitude_latency", params), seed=5)
+    case = dataclasses.replace(case, truth=dataclasses.replace(case.truth, effects=[]))
+    config = DiagnosisConfig(effects=FEW)
+    return diagnose(case, config), params, config
+
+
+def test_diagnosis_names_the_injected_effect_and_its_value(latency_diagnosis):
+    r, params, config = latency_diagnosis
+    assert r.verdict == "attitude_latency"
+    top = r.ranking[0]
+    assert top["effect"] == "attitude_latency" and top["significant"] and top["p_value"] < 1e-6
+    est, se = top["params"]["attitude_latency.delay_s"], top["params_se"]["attitude_latency.delay_s"]
+    assert 0 < se < 0.02 and abs(est - params["delay_s"]) < max(4 * se, 0.01)
+    assert r.gap_before > 1.0 and r.gap_after < 0.2 and not r.remaining_gap_significant
+    assert r.where[0]["channel"] in ("roll", "pitch", "heading") or r.where[0]["channel"].startswith("bt_")
+    oracle = oracle_shrink(r, "attitude_latency", params, config)
+    assert abs(top["shrink_fraction"] - oracle) <= 0.2 * abs(oracle)
+
+
+def test_effect_free_case_gets_none():
+    case = simulate(short_scenario(), seed=7)
+    r = diagnose(case, DiagnosisConfig(effects=FEW))
+    assert r.verdict == "none" and not r.remaining_gap_significant
+    assert abs(r.gap_before) < 0.1
+    assert len(r.where) >= 8  # every channel is reported, ranked
+
+
+def test_cli_diagnose_writes_the_report(tmp_path, latency_diagnosis):
+    from adcpdyn.cases.io import write_case
+    from adcpdyn.cli import main
+
+    case = simulate(with_effect(short_scenario(40.0), "sound_speed_error", {"relative_error": 0.03}), seed=2)
+    path = tmp_path / "case.h5"
+    write_case(case, path)
+    out = tmp_path / "diag.json"
+    assert main([ "diagnose", str(path), "--effects", "sound_speed_error", "attitude_latency", "--out", str(out)]) == 0
+    d = json.loads(out.read_text())
+    for key in ("verdict", "gap_before", "gap_after", "where", "ranking"):
+        assert key in d
+    assert d["verdict"] == "sound_speed_error"
+    assert {"channel", "score", "detail"} <= set(d["where"][0])
+    assert {"effect", "delta_ll", "delta_bic", "p_value", "params", "params_se", "gap_after",
+            "shrink_fraction"} <= set(d["ranking"][0])
+    assert out.with_suffix(".md").exists() and (tmp_path / f"{case.name}_residuals.png").exists()
+    assert main(["diagnose", str(path), "--out", str(path)]) == 2  # never overwrites the input
