@@ -59,7 +59,7 @@ def test_leave_fold_out_step_is_exact_for_a_linear_model():
     x = np.linalg.lstsq(A, y, rcond=None)[0]
     model = SimpleNamespace(times=t, mask=np.ones(n), weights=lambda sigma: np.ones(n))
     fit = SimpleNamespace(jacobian=A, raw=A @ x - y, sigma={})
-    pred = _cv_residuals(model, fit, folds=4, blocks_per_fold=3)
+    pred = _cv_residuals(model, fit, folds=4, block_s=100 / 12)
     edges = np.linspace(t.min(), t.max() + 1e-9, 13)
     fold = (np.searchsorted(edges, t, side="right") - 1) % 4
     for k in range(4):

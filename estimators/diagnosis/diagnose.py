@@ -45,7 +45,7 @@ class DiagnosisConfig:
 
     effects: tuple = tuple(CATALOG)
     cv_folds: int = 5
-    cv_blocks_per_fold: int = 6
+    cv_block_s: float = 2.0
     bic_margin: float = 10.0
     min_shrink: float = 0.25
     gap_z: float = 6.0
@@ -56,9 +56,10 @@ class DiagnosisConfig:
     def __post_init__(self):
         for name in self.effects:
             get_effect(name)
-        if self.cv_folds < 2 or self.cv_blocks_per_fold < 1:
-            raise ValueError(f"cv_folds, cv_blocks_per_fold: expected integers >= 2 and >= 1, got "
-                             f"{self.cv_folds}, {self.cv_blocks_per_fold}")
+        if self.cv_folds < 2:
+            raise ValueError(f"cv_folds: expected an integer >= 2, got {self.cv_folds}")
+        if not self.cv_block_s > 0:
+            raise ValueError(f"cv_block_s: expected a positive duration in s, got {self.cv_block_s}")
 
 
 @dataclass
@@ -118,20 +119,24 @@ def _group_sigma(model: GapModel, raw: np.ndarray) -> dict:
     return out
 
 
-def _cv_residuals(model: GapModel, fit: Fit, folds: int, blocks_per_fold: int) -> np.ndarray:
+def _cv_residuals(model: GapModel, fit: Fit, folds: int, block_s: float) -> np.ndarray:
     """Raw residuals of each held-out fold predicted by the fit with that fold left out.
 
-    The run is cut into ``folds * blocks_per_fold`` contiguous time blocks dealt to the
-    folds in turn (so a fold is spread over the run and slowly varying unknowns stay
+    The run is cut into contiguous time blocks of about ``block_s`` dealt to the folds in
+    turn (so a fold is spread over the run and slowly varying unknowns stay
     determined). The leave-fold-out estimate is one Gauss-Newton step from the full fit,
     damped by a millionth of the full-data information so a direction only the fold
-    determines stays put.
+    determines stays put. Unknowns pinned or held at a bound are not re-estimated (the
+    step would otherwise follow the bound's pull and fit the held-out data).
     """
     J = fit.jacobian
+    if getattr(fit, "free", None) is not None:  # a pinned unknown or one at its bound stays put
+        J = J[:, fit.free]
     w = model.weights(fit.sigma)
     e = w * fit.raw
     t = model.times
-    edges = np.linspace(t.min(), t.max() + 1e-9, folds * blocks_per_fold + 1)
+    n_blocks = max(folds, int(round((t.max() - t.min()) / block_s)))
+    edges = np.linspace(t.min(), t.max() + 1e-9, n_blocks + 1)
     fold_of = (np.searchsorted(edges, t, side="right") - 1) % folds
     damping = 1e-6 * np.maximum(np.sum(J**2, axis=0), 1e-12)
     pred = np.zeros_like(e)
@@ -252,7 +257,7 @@ def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibratio
             noise[g] = min(noise[g], v) if np.isfinite(v) else noise[g]
     noise = {g: max(v, 1e-9) for g, v in noise.items()}
 
-    cv = {name: _cv_residuals(m, f, config.cv_folds, config.cv_blocks_per_fold) for name, (m, f) in fits.items()}
+    cv = {name: _cv_residuals(m, f, config.cv_folds, config.cv_block_s) for name, (m, f) in fits.items()}
     gap_before, z_before = _gap(base_model, cv["base"], noise)
     ll0 = base.log_likelihood(base_model)
     n_obs = int((base_model.mask > 0).sum())

@@ -52,6 +52,7 @@ class Fit:
     jacobian: np.ndarray  # of the weighted residuals w.r.t. the scaled unknowns
     scale: np.ndarray
     bt_velocity_jacobian: np.ndarray | None = None  # (N, 4, 3) d radial / d v_a
+    free: np.ndarray | None = None  # unknowns neither pinned nor held by an active bound
 
     def group_rss(self, model: "GapModel") -> dict:
         out = {}
@@ -310,9 +311,12 @@ class GapModel:
         ms = multistart(self.solver, np.clip(x0s / self.scale, lbz, ubz), lbz, ubz, [], [], w, progress=False)
         e, raw, J = (np.asarray(a) for a in self.residual_fun(ms.x, w))
         x = ms.x * self.scale
+        z = np.asarray(ms.x).ravel()
+        tol = 1e-5 * np.maximum(np.abs(ubz - lbz), 1.0)
+        free = (z - lbz > tol) & (ubz - z > tol)
         return Fit(effects=[e_.name for e_ in self.effects], x=x, names=list(self.names), raw=raw.ravel() * self.mask,
                    sigma=dict(sigma), objective=float(ms.objective), success=bool(ms.success), status=ms.status,
-                   iterations=ms.iterations, jacobian=J, scale=self.scale.copy())
+                   iterations=ms.iterations, jacobian=J, scale=self.scale.copy(), free=free)
 
     def bt_velocity_jacobian(self, x) -> np.ndarray:
         """(N, 4, 3): d radial_i / d v_a per ping at the unknowns x (block diagonal, read sparsely)."""

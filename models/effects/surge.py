@@ -1,23 +1,25 @@
 """The navigation speed varies within the run: speed along the heading s(t).
 
-Injected as a sinusoidal speed change; modelled as a piecewise-linear speed on
-``N_KNOTS`` knots spanning the run (a surge the base's constant speed cannot follow).
+Injected as a sinusoidal speed change; modelled as a cubic B-spline speed with
+``N_COEFFICIENTS`` coefficients spanning the run (about 4.4 s between knots on a
+two-minute run; a surge the base's constant speed cannot follow).
 """
 
 from __future__ import annotations
 
 import casadi as ca
 import numpy as np
+from scipy.interpolate import BSpline
 
 from .base import Effect, Parameter
 
-N_KNOTS = 16
+N_COEFFICIENTS = 30
 
 
 class Surge(Effect):
     name = "surge"
     description = "speed along the heading varying within the run"
-    parameters = tuple(Parameter(f"speed_knot{k}_m_s", 0.05, -5.0, 5.0) for k in range(N_KNOTS))
+    parameters = tuple(Parameter(f"speed_spline{k}_m_s", 0.05, -5.0, 5.0) for k in range(N_COEFFICIENTS))
 
     def draw(self, rng):
         return {"amplitude_m_s": float(rng.uniform(0.12, 0.3)), "period_s": float(rng.uniform(15.0, 40.0)),
@@ -29,9 +31,11 @@ class Surge(Effect):
 
     @staticmethod
     def _basis(times, ctx):
-        knots = np.linspace(ctx.t0_s, ctx.t1_s, N_KNOTS)
-        eye = np.eye(N_KNOTS)
-        return ca.DM(np.column_stack([np.interp(times, knots, eye[:, k]) for k in range(N_KNOTS)]))
+        k = 3
+        inner = np.linspace(ctx.t0_s, ctx.t1_s, N_COEFFICIENTS - k + 1)
+        knots = np.concatenate([[ctx.t0_s] * k, inner, [ctx.t1_s] * k])
+        x = np.clip(np.asarray(times, dtype=float), ctx.t0_s, ctx.t1_s)
+        return ca.DM(BSpline.design_matrix(x, knots, k).toarray())
 
     def vessel_velocity(self, v, ctx, th):
         s = ca.mtimes(self._basis(ctx.ping_time_s, ctx), th)
