@@ -130,3 +130,14 @@ def test_cli_diagnose_writes_the_report(tmp_path, latency_diagnosis):
             "shrink_fraction"} <= set(d["ranking"][0])
     assert out.with_suffix(".md").exists() and (tmp_path / f"{case.name}_residuals.png").exists()
     assert main(["diagnose", str(path), "--out", str(path)]) == 2  # never overwrites the input
+
+
+def test_effect_outside_the_tried_catalog_is_reported_as_a_remaining_gap():
+    """Heave injected, heave not tried: no false verdict, the gap is significant and localised."""
+    params = {"omega_rad_s": 1.3, "cos_m": 0.1, "sin_m": -0.08}
+    case = simulate(with_effect(short_scenario(), "heave", params), seed=11)
+    r = diagnose(case, DiagnosisConfig(effects=FEW))
+    assert r.remaining_gap_significant
+    assert "significant gap remains" in r.statement
+    assert r.where[0]["channel"].startswith("bt_beam")
+    assert abs(r.where[0]["peak_rad_s"] - params["omega_rad_s"]) < 0.05
