@@ -1,4 +1,4 @@
-"""Command line: ``adcpdyn simulate | info | correct | scenarios | demo``."""
+"""Command line: ``adcpdyn simulate | import | info | correct | calibrate | compare | scenarios | demo``."""
 
 from __future__ import annotations
 
@@ -34,6 +34,32 @@ def cmd_simulate(args) -> int:
     case = simulate(get_scenario(args.scenario), seed=args.seed)
     write_case(case, args.out)
     print(f"wrote {args.out}: {case.pings.n} pings, {case.attitude.time_s.size} attitude samples")
+    return 0
+
+
+def cmd_import(args) -> int:
+    """A real instrument file (TRDI PD0, Nortek AD2CP) into a case file, with its audit trail."""
+    from .cases.importers import Window, import_file, write_imported
+
+    path = Path(args.file)
+    case, attrs = import_file(path, Window(start_s=args.start, end_s=args.end, every=args.every))
+    write_imported(case, attrs, args.out, source=path)
+    prov = attrs["/provenance"]
+    print(f"wrote {args.out}: {case.pings.n} pings over {case.pings.time_s[-1]:.1f} s, BT from "
+          f"{prov['coordinate_system_found']} coordinates, attitude frame {case.attitude.frame}, "
+          f"{int(np.sum(np.all(np.isfinite(case.pings.bt_radial_m_s), axis=1)))} pings with 4 valid beams")
+    if "clock_offset_s" in prov:
+        print(f"GNSS: {prov['gnss']}; clock offset GNSS - ADCP {prov['clock_offset_s']:+.2f} s "
+              f"(coarse {prov['clock_offset_coarse_s']:+.2f} s, speed correlation {prov['clock_offset_correlation']:.3f})")
+        if "bt_vs_gnss_speed_ratio_bt_over_gnss" in prov:
+            print(f"BT vs GNSS: speed ratio {prov['bt_vs_gnss_speed_ratio_bt_over_gnss']:.3f}, course offset (GNSS - BT) "
+                  f"{prov['bt_vs_gnss_course_offset_gnss_minus_bt_deg']:+.1f} +- {prov['bt_vs_gnss_course_offset_se_deg']:.1f} deg "
+                  f"over {prov['bt_vs_gnss_n']} samples")
+    else:
+        print(f"GNSS: {prov.get('gnss', 'none')}")
+    warning = attrs.get("/attitude", {}).get("attitude_warning")
+    if warning:
+        print(f"warning: attitude: {warning}")
     return 0
 
 
@@ -349,6 +375,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("import", help="import a TRDI PD0 or Nortek AD2CP file into a case file")
+    s.add_argument("file", help="instrument file (.PD0, .000, .ENS, .ENR, .ad2cp, ...)")
+    s.add_argument("--out", required=True, help="CASE.h5 (never the input file)")
+    s.add_argument("--start", type=float, help="first ping to keep, seconds from the file's first ping")
+    s.add_argument("--end", type=float, help="last ping to keep, seconds from the file's first ping")
+    s.add_argument("--every", type=int, default=1, help="keep every n-th ping (decimation for long files)")
+    s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("info", help="summarise a case file")
     s.add_argument("case")

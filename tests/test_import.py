@@ -1,0 +1,181 @@
+"""Import of real instrument files: conventions checked by independent routes, clear errors."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from adcpdyn.cases.importers import ImportFailure, Window, detect_vendor, import_file, write_imported
+from adcpdyn.cases.importers.rdi_frames import SWAP, beam_to_earth, rdi_matrix, to_beam
+from adcpdyn.cases.io import read_case
+from adcpdyn.estimators.asc import asc
+from adcpdyn.models.rotations import euler_matrix
+
+REAL = Path(os.environ.get("ADCPDYN_REAL_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"))
+EARTH_BT_TOL = 1e-6  # m/s: ASC Earth-frame BT against the instrument's own
+SPEED_RATIO_TOL = 0.05  # BT speed / GNSS speed within 5 %
+FRAME_TOL = 1e-12
+
+needs_reader = pytest.mark.skipif(not REAL.is_dir(), reason=f"real data folder {REAL} absent")
+
+
+def real(name: str) -> Path:
+    path = REAL / name
+    if not path.is_file():
+        pytest.skip(f"{path} absent")
+    pytest.importorskip("mhkit")
+    return path
+
+
+@pytest.fixture(scope="module")
+def imported():
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = import_file(real(name))
+        return cache[name]
+
+    return get
+
+
+# ---------------------------------------------------------------- frames (no data needed)
+def test_rdi_rotation_is_the_case_euler_matrix():
+    rng = np.random.default_rng(1)
+    for h, p, r in rng.uniform(-1.5, 1.5, (5, 3)):
+        assert np.max(np.abs(SWAP @ rdi_matrix(h, p, r)[0] @ SWAP - np.asarray(euler_matrix(h, p, r)))) < FRAME_TOL
+
+
+def test_beam_earth_round_trip():
+    rng = np.random.default_rng(2)
+    beams = rng.normal(size=(50, 4))
+    rot = rdi_matrix(*rng.uniform(-1, 1, (3, 50)))
+    earth = beam_to_earth(beams, np.deg2rad(20), rot)
+    assert np.max(np.abs(to_beam(earth, "earth", np.deg2rad(20), True, rot) - beams)) < FRAME_TOL
+
+
+# ---------------------------------------------------------------- real files
+def _instrument_bt(path):
+    from adcpdyn.cases.importers.reader import read_dolfyn
+
+    ds, _ = read_dolfyn(path)
+    return np.asarray(ds["vel_bt"].values, dtype=np.float64).T
+
+
+@needs_reader
+def test_earth_file_asc_matches_instrument_earth_bt(imported):
+    case, attrs = imported("RDI_withBT.000")
+    assert attrs["/provenance"]["coordinate_system_found"] == "earth"
+    v = asc(case).vessel_velocity_m_s  # NED velocity of the transducer
+    enu = _instrument_bt(real("RDI_withBT.000"))[:, :3]  # bottom relative to the ADCP, E N U
+    ok = np.all(np.isfinite(case.pings.bt_radial_m_s), axis=1) & np.all(np.abs(enu) < 30, axis=1)
+    assert ok.sum() > 800
+    mine = np.column_stack([-v[ok, 1], -v[ok, 0], v[ok, 2]])
+    assert np.max(np.abs(mine - np.round(enu[ok] * 1000) / 1000)) < EARTH_BT_TOL
+
+
+@needs_reader
+def test_ship_file_asc_matches_instrument_ship_bt(imported):
+    case, attrs = imported("winriver01.PD0")
+    assert attrs["/provenance"]["coordinate_system_found"] == "ship"
+    v = asc(case).vessel_velocity_m_s
+    psi = case.attitude.heading_rad
+    fwd = np.cos(psi) * v[:, 0] + np.sin(psi) * v[:, 1]
+    stbd = -np.sin(psi) * v[:, 0] + np.cos(psi) * v[:, 1]
+    ship = _instrument_bt(real("winriver01.PD0"))[:, :3]  # X starboard, Y bow, Z up, bottom relative to the ADCP
+    ok = np.all(np.isfinite(case.pings.bt_radial_m_s), axis=1)
+    mine = np.column_stack([-stbd[ok], -fwd[ok], v[ok, 2]])
+    assert np.max(np.abs(mine - np.round(ship[ok] * 1000) / 1000)) < EARTH_BT_TOL
+
+
+@needs_reader
+@pytest.mark.parametrize("name, offset_s, tol_s", [("RiverPro_test01.PD0", 2.0, 1.0),
+                                                    ("winriver01.PD0", 4 * 3600 + 25.0, 3.0),
+                                                    ("winriver02_transect.PD0", 8 * 3600 + 1.0, 2.0)])
+def test_bt_speed_agrees_with_gnss(imported, name, offset_s, tol_s):
+    case, attrs = imported(name)
+    prov = attrs["/provenance"]
+    assert case.attitude.frame == "transducer"
+    assert abs(prov["clock_offset_s"] - offset_s) < tol_s
+    assert abs(prov["bt_vs_gnss_speed_ratio_bt_over_gnss"] - 1.0) < SPEED_RATIO_TOL
+    assert abs(prov["bt_vs_gnss_course_offset_gnss_minus_bt_deg"]) < 30.0  # a sign error would give ~180
+    ref = case.reference
+    assert np.all(np.diff(ref.time_s) > 0) and ref.time_s[0] > -10 and ref.time_s[-1] < case.pings.time_s[-1] + 10
+
+
+@needs_reader
+def test_beam_file_without_attitude_is_flagged(imported):
+    case, attrs = imported("vmdas02_os.ENR")
+    assert attrs["/attitude"]["attitude_recorded"] == 0 and "no attitude" in attrs["/attitude"]["attitude_warning"]
+    assert case.reference is None
+    bt = np.nanmedian(case.pings.bt_radial_m_s, axis=0)  # underway along x_t (RDI beam 3 = case beam 2)
+    assert bt[1] > 2.0 and bt[0] < -2.0 and np.all(np.abs(bt[2:]) < 0.5)
+
+
+@needs_reader
+def test_bad_marker_and_slant_ranges(imported):
+    case, _ = imported("RiverPro_test01.PD0")
+    bt = case.pings.bt_radial_m_s
+    assert np.all(np.isnan(bt) | (np.abs(bt) < 32.0))
+    rng = case.pings.bt_range_m
+    assert np.nanmin(rng) > 0 and np.nanmedian(rng) * np.cos(case.instrument.beam_angle_rad) < 10
+
+
+@needs_reader
+def test_written_case_validates_with_provenance(tmp_path, imported):
+    case, attrs = imported("RiverPro_test01.PD0")
+    out = tmp_path / "rp.h5"
+    write_imported(case, attrs, out, source=real("RiverPro_test01.PD0"))
+    back = read_case(out)
+    assert back.pings.n == case.pings.n and back.attitude.frame == "transducer"
+    with h5py.File(out) as f:
+        assert "RDI beams 4,3,2,1" in f["/provenance"].attrs["beam_mapping"]
+        assert f["/provenance"].attrs["clock_offset_s"] == attrs["/provenance"]["clock_offset_s"]
+
+
+@needs_reader
+def test_window_and_decimation():
+    path = real("RiverPro_test01.PD0")
+    case, attrs = import_file(path, Window(start_s=20.0, end_s=120.0, every=2))
+    assert case.pings.time_s[0] == 0.0 and case.pings.time_s[-1] <= 100.0
+    assert 60 < case.pings.n < 80 and "every 2" in attrs["/provenance"]["selection"]
+
+
+@needs_reader
+@pytest.mark.parametrize("name, words", [("adcp.adc", "could not read the file"),
+                                         ("Sig1000_IMU.ad2cp", "bottom track: none"),
+                                         ("clllm_20250530T065119_009_000000.ENS", "bottom track: none")])
+def test_unsupported_files_fail_in_one_line(tmp_path, capsys, name, words):
+    from adcpdyn.cli import main
+
+    path = real(name)
+    assert main(["import", str(path), "--out", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err and err.count("\n") == 1
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_bad_inputs(tmp_path):
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(b"hello")
+    with pytest.raises(ImportFailure, match="file type: expected a TRDI PD0"):
+        detect_vendor(junk)
+    with pytest.raises(ImportFailure, match="no such file"):
+        detect_vendor(tmp_path / "missing.PD0")
+    with pytest.raises(ValueError, match="every: expected an integer >= 1"):
+        Window(every=0)
+
+
+@needs_reader
+def test_import_refuses_to_overwrite_input(tmp_path, capsys):
+    from adcpdyn.cli import main
+
+    src = tmp_path / "copy.PD0"
+    src.write_bytes(real("RiverPro_test01.PD0").read_bytes())
+    assert main(["import", str(src), "--out", str(src)]) == 2
+    assert "inputs are never overwritten" in capsys.readouterr().err
+    assert src.read_bytes() == real("RiverPro_test01.PD0").read_bytes()
