@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -70,7 +71,8 @@ def cmd_info(args) -> int:
     return 0
 
 
-CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
+from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
+from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
 def _load_calibration(path):
@@ -80,31 +82,57 @@ def _load_calibration(path):
         return json.load(fh)
 
 
-def _correct(case, method, calibration):
-    from .estimators.adc import dynamic_correction
-    from .estimators.asc import asc
-
-    if method not in CORRECTION_METHODS:
-        raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
-    if method == "asc":
-        ypr = None
-        if calibration is not None and case.attitude.frame == "vessel":
-            ypr = _installation_from(calibration)
-        return asc(case, ypr)
-    return dynamic_correction(case, method, calibration)
+def _batch_out(args) -> Path:
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out: {out} is a file; with many cases --out names a folder (one output per case)")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
 
 
-def _installation_from(calibration: dict):
-    value = calibration.get("installation_ypr_rad")
-    if value is None or any(v is None for v in value):
-        raise ValueError("calibration: installation_ypr_rad: missing or not determined; expected 3 angles in radians")
-    return np.asarray(value, dtype=float)
+def _run_batch(args, jobs, columns) -> int:
+    """Run jobs (serial or Dask), print one row per case, write ``summary.json`` in --out."""
+    from .batch import run_batch, write_summary
+
+    out = Path(args.out)
+    tic = time.perf_counter()
+    rows = run_batch(jobs, scheduler=args.scheduler, n_workers=args.workers)
+    wall = time.perf_counter() - tic
+    name_w = max(len(Path(r["case"]).stem) for r in rows) + 2
+    print(f"{'case':<{name_w}}{'status':<10}" + "".join(f"{label:>{w}}" for label, _, w, _ in columns) + f"{'time s':>8}")
+    for r in rows:
+        status = "error" if r["error"] else ("ok" if r["success"] else "failed")
+        line = f"{Path(r['case']).stem:<{name_w}}{status:<10}"
+        if r["error"]:
+            line += f"  {r['error']}"
+        else:
+            line += "".join(f"{fmt(r[key]):>{w}}" for _, key, w, fmt in columns) + f"{r['time_s']:>8.2f}"
+        print(line)
+    write_summary(rows, out / "summary.json")
+    n_err = sum(bool(r["error"]) for r in rows)
+    n_fail = sum(not r["error"] and not r["success"] for r in rows)
+    print(f"{len(rows)} cases on scheduler {args.scheduler!r} in {wall:.1f} s: {len(rows) - n_err - n_fail} ok, "
+          f"{n_fail} not converged, {n_err} errors; wrote {out}/ (one output per case) and {out / 'summary.json'}")
+    return 2 if n_err else (1 if n_fail else 0)
 
 
 def cmd_correct(args) -> int:
     from .cases.atomic import refuse_overwrite_input
+    from .cases.collect import collect_case_paths, is_many
     from .cases.corrected import write_correction
 
+    if is_many(args.case):
+        from .batch import CorrectJob, check_scheduler
+
+        check_scheduler(args.scheduler)
+        if args.method not in CORRECTION_METHODS:
+            raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {args.method!r}")
+        paths, out = collect_case_paths(args.case), _batch_out(args)
+        calib = str(Path(args.calibration).resolve()) if args.calibration else None
+        jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib) for p in paths]
+        return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
+                                       ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
+    args.case = args.case[0]
     refuse_overwrite_input(args.out, args.case, args.calibration)
     case = _read(args.case)
     result = _correct(case, args.method, _load_calibration(args.calibration))
@@ -161,8 +189,20 @@ def cmd_calibrate(args) -> int:
     import warnings
 
     from .cases.atomic import refuse_overwrite_input
+    from .cases.collect import collect_case_paths, is_many
     from .estimators.calibration import CalibrationProblem
 
+    if is_many(args.case):
+        from .batch import CalibrateJob, check_scheduler
+
+        check_scheduler(args.scheduler)
+        config = _calibration_config(args)
+        paths, out = collect_case_paths(args.case), _batch_out(args)
+        jobs = [CalibrateJob(str(p), str((out / f"{p.stem}.json").resolve()), config) for p in paths]
+        return _run_batch(args, jobs, [("objective", "objective", 12, "{:.6g}".format),
+                                       ("max viol", "max_constraint_violation", 10, "{:.1e}".format),
+                                       ("at best", "fraction_at_best", 9, "{:.2f}".format)])
+    args.case = args.case[0]
     refuse_overwrite_input(args.out, args.case)
     case = _read(args.case)
     with warnings.catch_warnings():
@@ -190,42 +230,15 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_compare_formulations(args) -> int:
-    import time
-    import warnings
-
-    from .estimators.calibration import CalibrationProblem
-    from .estimators.evaluation import calibration_errors
-    from .estimators.formulations import FORMULATIONS
+    from .estimators.formulation_compare import compare_formulations, format_rows
 
     case = _read(args.case)
-    head = f"{'formulation':<12}{'objective':>12}{'max viol':>10}{'time s':>8}{'at best':>9}{'unobs':>7}{'weak':>6}"
-    if case.truth is not None:
-        head += f"{'tang rms mm/s':>15}{'lever rms mm':>14}"
-    print(head)
-    rows = {}
-    for form in FORMULATIONS:
-        tic = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            r = CalibrationProblem(case, _calibration_config(args, form)).solve()
-        elapsed = time.perf_counter() - tic
-        kinds = [u["kind"] for u in r.uncertainty.unobservable if "attitude-model" not in u["description"]]
-        line = (f"{form:<12}{r.objective:>12.5g}{r.max_constraint_violation:>10.1e}{elapsed:>8.2f}"
-                f"{r.multistart.fraction_at_best:>9.2f}{kinds.count('unobservable'):>7d}{kinds.count('weak'):>6d}")
-        row = {"objective": r.objective, "max_constraint_violation": r.max_constraint_violation, "time_s": elapsed,
-               "fraction_at_best": r.multistart.fraction_at_best, "success": r.success,
-               "unobservable": [u for u in r.uncertainty.unobservable if "attitude-model" not in u["description"]]}
-        if case.truth is not None:
-            e = calibration_errors(case, r)
-            line += f"{1e3 * e['tangential_radial_rms_m_s']:>15.3f}{1e3 * e['lever_arm_rms_error_m']:>14.2f}"
-            row.update(e)
-        print(line)
-        rows[form] = row
+    rows = compare_formulations(case, _calibration_config(args))
+    print(format_rows(rows))
     if args.out:
-        from .estimators.calibration import _jsonable
+        from .solvers.bench_common import write_json
 
-        with open(args.out, "w") as fh:
-            json.dump(_jsonable(rows), fh, indent=2)
+        write_json(rows, Path(args.out))
     return 0
 
 
@@ -388,11 +401,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("case")
     s.set_defaults(func=cmd_info)
 
-    s = sub.add_parser("correct", help="correct every ping of a case")
-    s.add_argument("case")
+    def batch_options(s):
+        s.add_argument("--scheduler", default="local",
+                       help="many cases: local (a Dask LocalCluster, default), none (serial) or a scheduler address")
+        s.add_argument("--workers", type=int, default=None, help="many cases: LocalCluster worker processes")
+
+    s = sub.add_parser("correct", help="correct every ping of a case (or of many: files, a folder or a glob)")
+    s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
+    batch_options(s)
     s.add_argument("--method", default="asc", help="asc | adc | paper_literal | rootfinder | oracle")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
-    s.add_argument("--out", required=True)
+    s.add_argument("--out", required=True, help="output file; with many cases, a folder")
     s.set_defaults(func=cmd_correct)
 
     s = sub.add_parser("compare", help="every correction method on one case: metrics table and figures")
@@ -409,10 +428,11 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--timing", default="auto", help="auto | shallow | deep bottom-track model")
         s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
 
-    s = sub.add_parser("calibrate", help="estimate attitude model, lever arms and installation angles")
-    s.add_argument("case")
+    s = sub.add_parser("calibrate", help="estimate attitude model, lever arms and installation angles (one or many cases)")
+    s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
     calibration_options(s)
-    s.add_argument("--out", required=True, help="CALIB.json")
+    batch_options(s)
+    s.add_argument("--out", required=True, help="CALIB.json; with many cases, a folder (CASE.json each, summary.json)")
     s.set_defaults(func=cmd_calibrate)
 
     s = sub.add_parser("compare-formulations", help="calibrate with every constraint formulation and tabulate")
@@ -432,7 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("bench", help="benchmarks with their targets")
-    s.add_argument("suite", help="calibration | correction")
+    s.add_argument("suite", help="calibration | correction | formulations | solvers | scale")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results")
     s.set_defaults(func=cmd_bench)

@@ -552,7 +552,7 @@ class CalibrationProblem:
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
         make = lambda: build_solver(self.nlp, cfg.solver, "calibration", residuals=self.jacobian_fun)
         ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
-                        make_solver=make)
+                        make_solver=make, warm_start=cfg.solver.warm_start)
         if cfg.estimate_noise:
             self.sigma = self._reestimate_sigmas(ms.x)
             refit = multistart(self.solver, ms.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)

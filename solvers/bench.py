@@ -7,23 +7,16 @@ machine, versions and seeds.
 
 from __future__ import annotations
 
-import json
-import platform
 import time
 import warnings
 from pathlib import Path
 
-import casadi as ca
 import numpy as np
 
-SUITES = ("calibration", "correction")
+from .bench_common import machine as _machine
+from .bench_common import save_figure, write_json
 
-
-def _machine() -> dict:
-    import os
-
-    return {"python": platform.python_version(), "casadi": ca.__version__, "numpy": np.__version__,
-            "machine": platform.machine(), "cpus": os.cpu_count(), "platform": platform.platform()}
+SUITES = ("calibration", "correction", "formulations", "solvers", "scale")
 
 
 def _calibrate(case, **kw):
@@ -192,20 +185,80 @@ def print_correction(res: dict) -> None:
     res["targets"] = [{"target": label, "value": float(value), "met": bool(ok)} for label, value, ok in targets]
 
 
+def figure_calibration(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3.8))
+    for k, (sc, methods) in enumerate(res["scenarios"].items()):
+        for j, (m, rows) in enumerate(methods["per_seed"].items()):
+            ax.semilogy(np.full(len(rows), 3 * k + j) + np.linspace(-0.2, 0.2, len(rows)),
+                        [1e3 * r["tangential_radial_rms_m_s"] for r in rows], "o", ms=3, color=f"C{j}",
+                        label=m if k == 0 else None)
+    ax.set_xticks([3 * k + 1 for k in range(len(res["scenarios"]))], list(res["scenarios"]))
+    ax.axhline(3.0, color="r", lw=0.8, ls="--", label="target 3 mm/s")
+    ax.set_ylabel("tangential radial RMS error (mm/s)")
+    ax.legend(fontsize=7)
+    ax.set_title(f"calibration over {len(res['seeds'])} seeds")
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def figure_correction(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = [r["n_pings"] for r in res["rows"]]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for m in ("asc", "adc", "rootfinder"):
+        ax.loglog(n, [r[f"{m}_pings_per_s"] for r in res["rows"]], "o-", label=m)
+    ax.axhline(1e6, color="r", lw=0.8, ls="--", label="target 1e6 pings/s")
+    ax.set_xlabel("pings")
+    ax.set_ylabel("pings per second")
+    ax.legend(fontsize=8)
+    ax.set_title("correction throughput (one run)")
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def _suite(suite: str, quick: bool):
+    """(result, printer, figure maker) of one suite."""
+    if suite == "calibration":
+        return bench_calibration(seeds=5 if quick else 20, starts=8, deep_seeds=1 if quick else 3), \
+            print_calibration, figure_calibration
+    if suite == "correction":
+        res = bench_correction([10**3, 10**4, 10**5] if quick else [10**3, 10**4, 10**5, 10**6])
+        return res, print_correction, figure_correction
+    if suite == "formulations":
+        from .bench_formulations import bench_formulations, figure_formulations, print_formulations
+
+        return bench_formulations(seeds=1 if quick else 5, starts=8), print_formulations, figure_formulations
+    if suite == "solvers":
+        from .bench_solvers import bench_solvers, figure_solvers, print_solvers
+
+        return bench_solvers(starts=8, jit=not quick), print_solvers, figure_solvers
+    from .bench_scale import bench_scale, figure_scale, print_scale
+
+    sizes = [100, 300, 1000, 3000] if quick else [100, 300, 1000, 3000, 10**4, 3 * 10**4, 10**5]
+    return bench_scale(sizes, time_limit_s=120.0 if quick else 900.0), print_scale, figure_scale
+
+
 def run(suite: str, quick: bool, out_dir: Path) -> dict:
+    """Run one suite; print its table and targets; write ``<suite>.json`` and ``<suite>.png``."""
     if suite not in SUITES:
         raise ValueError(f"suite: expected one of {list(SUITES)}, got {suite!r}")
-    if suite == "calibration":
-        res = bench_calibration(seeds=5 if quick else 20, starts=8, deep_seeds=1 if quick else 3)
-        print_calibration(res)
-    else:
-        res = bench_correction([10**3, 10**4, 10**5] if quick else [10**3, 10**4, 10**5, 10**6])
-        print_correction(res)
+    tic = time.perf_counter()
+    res, show, figure = _suite(suite, quick)
+    res["quick"] = bool(quick)
+    res["suite_wall_s"] = time.perf_counter() - tic
+    show(res)
+    out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / f"{suite}.json"
-    from ..estimators.calibration import _jsonable
-
-    with open(path, "w") as fh:
-        json.dump(_jsonable(res), fh, indent=2)
-    print(f"\nwrote {path}")
+    write_json(res, out_dir / f"{suite}.json")
+    figure(res, out_dir / f"{suite}.png")
+    print(f"\nwrote {out_dir / (suite + '.json')}, {out_dir / (suite + '.png')} ({res['suite_wall_s']:.0f} s)")
     return res

@@ -8,6 +8,7 @@ result says which start reached the best, how many did, and every start's record
 from __future__ import annotations
 
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 
@@ -41,6 +42,11 @@ class SolverOptions:
         IPOPT's gradient-based NLP scaling.
     expand : bool
         Expand MX graphs to SX before solving (faster for small and medium problems).
+    warm_start : bool
+        Multistart: starts after the first begin from their own x0 but with the first
+        start's multipliers and a small barrier parameter (IPOPT warm start).
+    jit : bool
+        Compile the NLP's functions with the system C compiler (CasADi ``jit``).
     print_level : int
     """
 
@@ -50,6 +56,8 @@ class SolverOptions:
     linear_solver: str = "mumps"
     scaling: bool = True
     expand: bool = True
+    warm_start: bool = False
+    jit: bool = False
     print_level: int = 0
 
     def __post_init__(self):
@@ -57,7 +65,7 @@ class SolverOptions:
             raise ValueError(f"SolverOptions.hessian: expected one of {list(HESSIANS)}, got {self.hessian!r}")
 
     def ipopt(self) -> dict:
-        return {
+        opts = {
             "expand": self.expand,
             "print_time": False,
             "ipopt.print_level": self.print_level,
@@ -69,6 +77,13 @@ class SolverOptions:
             "ipopt.linear_solver": self.linear_solver,
             "ipopt.nlp_scaling_method": "gradient-based" if self.scaling else "none",
         }
+        if self.warm_start:
+            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+        if self.jit:  # objects go to a temporary folder; CasADi leaves the C source in the working folder
+            opts.update({"jit": True, "compiler": "shell", "jit_options": {
+                "flags": ["-O1"], "verbose": False, "directory": tempfile.mkdtemp(prefix="adcpdyn_jit_") + "/"}})
+        return opts
 
 
 @dataclass(frozen=True)
@@ -155,7 +170,8 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
 
 
 def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: float = 1e-6,
-               x_scale=None, progress: bool | None = None, workers: int = 1, make_solver=None) -> MultistartResult:
+               x_scale=None, progress: bool | None = None, workers: int = 1, make_solver=None,
+               warm_start: bool = False) -> MultistartResult:
     """Solve from every row of ``x0s``; return the best with per-start records.
 
     Parameters
@@ -178,6 +194,9 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
         (a solver's memory is not shared between concurrent calls).
     make_solver : callable, optional
         Builds another solver like ``solver``; required when ``workers > 1``.
+    warm_start : bool
+        Solve the first start alone, then give every other start its multipliers
+        (``lam_x0``, ``lam_g0``); the solver must be built with IPOPT's warm start.
     """
     x0s = np.atleast_2d(np.asarray(x0s, dtype=float))
     if progress is None:
@@ -186,19 +205,27 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
     workers = max(1, min(int(workers), n)) if make_solver is not None else 1
     solvers = [solver] + [make_solver() for _ in range(workers - 1)]
 
+    warm: dict = {}
+
     def solve(i, s):
         tic = time.perf_counter()
-        sol = s(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p)
+        sol = s(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p, **warm)
         elapsed = time.perf_counter() - tic
         stats = s.stats()
         f = float(sol["f"])
         record = dict(index=i, objective=f if np.isfinite(f) else np.inf, iterations=int(stats.get("iter_count", -1)),
                       time_s=elapsed, status=str(stats.get("return_status", "unknown")),
                       success=bool(stats.get("success", False)))
-        return record, (np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["g"]).ravel())
+        return record, (np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["g"]).ravel(),
+                        np.asarray(sol["lam_x"]).ravel())
 
+    first = []
+    if warm_start and n > 1:
+        first = [solve(0, solver)]
+        warm.update(lam_x0=first[0][1][3], lam_g0=first[0][1][1])
+    todo = range(len(first), n)
     if workers == 1:
-        done = [solve(i, solver) for i in _progress(range(n), n, progress)]
+        done = first + [solve(i, solver) for i in _progress(todo, len(todo), progress)]
     else:
         import queue
         from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -215,8 +242,8 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
                 idle.put(s)
 
         with ThreadPoolExecutor(workers) as pool:
-            futures = [pool.submit(task, i) for i in range(n)]
-            done = [f.result() for f in _progress(as_completed(futures), n, progress)]
+            futures = [pool.submit(task, i) for i in todo]
+            done = first + [f.result() for f in _progress(as_completed(futures), len(todo), progress)]
     done.sort(key=lambda item: item[0]["index"])
     records = [d[0] for d in done]
     sols = [d[1] for d in done]
@@ -239,7 +266,7 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
             groups.append((f, x))
     f_best = objectives[best]
     at_best = np.abs(objectives - f_best) <= objective_rtol * max(1.0, abs(f_best))
-    x, lam_g, g = sols[best]
+    x, lam_g, g, _ = sols[best]
     return MultistartResult(
         x=x,
         objective=float(f_best),

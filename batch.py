@@ -1,0 +1,164 @@
+"""Many cases at once: one job per case file, run serially or on Dask (``dask.distributed``).
+
+A job carries only paths and frozen option dataclasses; the worker reads the case and
+builds every CasADi Function itself (Functions are not sent between processes). Each
+job writes its own output atomically and returns a small summary; a case that fails
+reports its one-line error and does not stop the others.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+
+from .estimators.calibration import CalibrationConfig
+
+LOCAL, SERIAL = "local", "none"
+
+
+@dataclass(frozen=True)
+class CalibrateJob:
+    """Calibrate one case file into one CALIB.json."""
+
+    case_path: str
+    out_path: str
+    config: CalibrationConfig
+
+
+@dataclass(frozen=True)
+class CorrectJob:
+    """Correct one case file with one method into one corrected file."""
+
+    case_path: str
+    out_path: str
+    method: str
+    calibration_path: str | None = None
+
+
+def _calibrate(job: CalibrateJob) -> dict:
+    from .cases.io import read_case
+    from .estimators.calibration import CalibrationProblem
+
+    case = read_case(job.case_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # warnings are written into the result
+        r = CalibrationProblem(case, job.config).solve()
+    r.to_json(job.out_path)
+    ms = r.multistart
+    return {"success": r.success, "objective": r.objective, "max_constraint_violation": r.max_constraint_violation,
+            "fraction_at_best": ms.fraction_at_best, "iterations": ms.iterations,
+            "lever_arms_sensor_m": r.lever_arms_sensor_m.tolist(), "installation_ypr_rad": r.installation_ypr_rad.tolist(),
+            "warnings": len(r.warnings)}
+
+
+def _correct(job: CorrectJob) -> dict:
+    import numpy as np
+
+    from .cases.corrected import write_correction
+    from .cases.io import read_case
+    from .estimators.correct_case import correct_case
+
+    calibration = None
+    if job.calibration_path is not None:
+        with open(job.calibration_path) as fh:
+            calibration = json.load(fh)
+    result = correct_case(read_case(job.case_path), job.method, calibration)
+    write_correction(result, job.out_path, source_case=job.case_path)
+    v = result.vessel_velocity_m_s
+    return {"success": True, "method": result.method, "pings": len(v),
+            "mean_horizontal_speed_m_s": float(np.nanmean(np.hypot(v[:, 0], v[:, 1]))),
+            "three_beam": int(np.sum(result.beams_used == 3)), "lost": int(np.sum(result.beams_used < 3))}
+
+
+def run_job(job) -> dict:
+    """Run one job where it lands (a Dask worker or this process); never raises for bad input."""
+    tic = time.perf_counter()
+    row = {"case": job.case_path, "output": job.out_path}
+    try:
+        row.update(_calibrate(job) if isinstance(job, CalibrateJob) else _correct(job))
+        row["error"] = None
+    except (ValueError, OSError) as exc:  # one-line errors of a bad case; the batch goes on
+        row.update(success=False, error=str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    row["time_s"] = time.perf_counter() - tic
+    return row
+
+
+def check_scheduler(scheduler: str) -> str:
+    """``local``, ``none`` or a scheduler address (``tcp://host:port`` or ``host:port``)."""
+    if scheduler in (LOCAL, SERIAL):
+        return scheduler
+    address = scheduler.split("://", 1)[-1]
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"--scheduler: expected {LOCAL!r}, {SERIAL!r} or an address like tcp://127.0.0.1:8786, "
+                         f"got {scheduler!r}")
+    return scheduler
+
+
+def _bar(total: int, progress: bool | None):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="case", desc="cases", disable=not (sys.stderr.isatty() if progress is None else progress))
+
+
+def run_batch(jobs, scheduler: str = LOCAL, n_workers: int | None = None, progress: bool | None = None) -> list[dict]:
+    """Every job's summary, in job order.
+
+    Parameters
+    ----------
+    jobs : list of CalibrateJob or CorrectJob
+    scheduler : str
+        ``local`` (a LocalCluster of single-threaded worker processes: CasADi's symbolic
+        graphs are not safe to build from several threads of one process), ``none``
+        (serial, in this process) or the address of a running Dask scheduler.
+    n_workers : int, optional
+        Size of the LocalCluster (default: the number of CPUs, at most one per job).
+    progress : bool, optional
+        Progress bar on stderr (default: when stderr is a terminal).
+    """
+    jobs = list(jobs)
+    scheduler = check_scheduler(scheduler)
+    if not jobs:
+        return []
+    if scheduler == SERIAL:
+        out = []
+        with _bar(len(jobs), progress) as bar:
+            for job in jobs:
+                out.append(run_job(job))
+                bar.update()
+        return out
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler == LOCAL:
+        n = max(1, min(n_workers or os.cpu_count() or 1, len(jobs)))
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    try:
+        with Client(cluster if cluster is not None else scheduler, timeout="15s") as client:
+            futures = client.map(run_job, jobs, pure=False)
+            order = {f.key: i for i, f in enumerate(futures)}
+            out: list = [None] * len(jobs)
+            with _bar(len(jobs), progress) as bar:
+                for f in as_completed(futures):
+                    out[order[f.key]] = f.result()
+                    bar.update()
+            return out
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def write_summary(rows: list[dict], path) -> None:
+    """The batch's summaries as JSON, atomically."""
+    from .cases.atomic import atomic_path
+    from .estimators.calibration import _jsonable
+
+    with atomic_path(path) as tmp:
+        with open(tmp, "w") as fh:
+            json.dump(_jsonable(rows), fh, indent=2)

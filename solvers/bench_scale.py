@@ -1,0 +1,111 @@
+"""``adcpdyn bench scale``: calibration time and peak memory against the number of pings.
+
+Each size runs in a child process (:mod:`.scale_worker`) with a time limit; sizes stop
+once one fails or when the growth fitted so far predicts the next one beyond the time
+or memory budget (the skip and its reason are recorded). The growth exponent is a
+log-log least-squares fit over the measured sizes.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .bench_common import Target, machine, print_targets, save_figure
+from .scale_worker import HESSIAN, PING_INTERVAL_S, SCENARIO
+
+LINEAR_TOLERANCE = 0.1  # exponent up to 1.1 counts as linear growth (timing noise)
+
+
+def growth_exponent(n, y) -> tuple[float, float]:
+    """(exponent b, prefactor a) of y = a n^b by least squares in log-log."""
+    b, log_a = np.polyfit(np.log(np.asarray(n, float)), np.log(np.asarray(y, float)), 1)
+    return float(b), float(np.exp(log_a))
+
+
+def bench_scale(sizes, seed: int = 1, time_limit_s: float = 600.0, memory_limit_mb: float = 8000.0) -> dict:
+    rows, skipped = [], []
+    for n in sizes:
+        if len(rows) >= 2:
+            bt, at = growth_exponent([r["n_pings"] for r in rows], [r["calibration_s"] for r in rows])
+            bm, am = growth_exponent([r["n_pings"] for r in rows], [r["peak_rss_mb"] for r in rows])
+            t_pred, m_pred = at * n**bt, am * n**bm
+            if t_pred > time_limit_s or m_pred > memory_limit_mb:
+                skipped.append({"n_pings": n, "reason": f"predicted {t_pred:.0f} s and {m_pred:.0f} MB from the sizes "
+                                f"measured (limits {time_limit_s:.0f} s, {memory_limit_mb:.0f} MB)"})
+                continue
+        cmd = [sys.executable, "-m", "adcpdyn.solvers.scale_worker", str(n), str(seed)]
+        try:
+            out = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit_s)
+        except subprocess.TimeoutExpired:
+            skipped.append({"n_pings": n, "reason": f"exceeded the time limit of {time_limit_s:.0f} s"})
+            break
+        if out.returncode != 0:
+            skipped.append({"n_pings": n, "reason": f"worker exited with status {out.returncode}: "
+                            f"{out.stderr.strip().splitlines()[-1] if out.stderr.strip() else ''}"})
+            break
+        rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        print(f"  {rows[-1]['n_pings']:>7d} pings: {rows[-1]['calibration_s']:.2f} s, {rows[-1]['peak_rss_mb']:.0f} MB",
+              flush=True)
+    res = {"suite": "scale", "machine": machine(), "scenario": SCENARIO, "ping_interval_s": list(PING_INTERVAL_S),
+           "seed": seed, "sizes_requested": list(sizes), "time_limit_s": time_limit_s,
+           "memory_limit_mb": memory_limit_mb, "rows": rows, "skipped": skipped,
+           "calibration": f"one start, one thread, {HESSIAN} Hessian, default CalibrationConfig otherwise"}
+    if len(rows) >= 2:
+        n = [r["n_pings"] for r in rows]
+        res["exponents"] = {k: growth_exponent(n, [r[k] for r in rows])[0]
+                            for k in ("calibration_s", "setup_s", "solve_s", "peak_rss_mb")}
+    return res
+
+
+def print_scale(res: dict) -> None:
+    print(f"scale benchmark: {res['scenario']} stretched to long runs at ~{2 / sum(res['ping_interval_s']):.0f} Hz, "
+          f"seed {res['seed']}; {res['calibration']}; each size in its own process (one run, noisy)")
+    print(f"{'pings':>8}{'simulate s':>11}{'set-up s':>10}{'solve s':>9}{'calib s':>9}{'peak MB':>9}{'iter':>6}"
+          f"{'tang mm/s':>10}")
+    for r in res["rows"]:
+        print(f"{r['n_pings']:>8d}{r['simulate_s']:>11.2f}{r['setup_s']:>10.2f}{r['solve_s']:>9.2f}"
+              f"{r['calibration_s']:>9.2f}{r['peak_rss_mb']:>9.0f}{r['iterations']:>6d}"
+              f"{1e3 * r['tangential_radial_rms_m_s']:>10.3f}")
+    for s in res["skipped"]:
+        print(f"  {s['n_pings']} pings not run: {s['reason']}")
+    ex = res.get("exponents", {})
+    if ex:
+        print("growth exponents (log-log least squares): " + ", ".join(f"{k} {v:.2f}" for k, v in ex.items()))
+    big = [r for r in res["rows"] if r["n_pings"] >= 10**5]
+    t = big[0]["calibration_s"] if big else float("nan")
+    label = "calibration of 1e5 pings < 10 s" + ("" if big else " (1e5 not run: see above)")
+    b = ex.get("calibration_s", float("nan"))
+    print_targets(res, [Target(label, t, bool(big) and t < 10.0),
+                        Target(f"calibration cost grows no faster than linearly (exponent <= {1 + LINEAR_TOLERANCE:.1f})",
+                               b, bool(np.isfinite(b)) and b <= 1 + LINEAR_TOLERANCE)])
+
+
+def figure_scale(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = np.array([r["n_pings"] for r in res["rows"]], float)
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    for k, label in (("calibration_s", "calibration"), ("setup_s", "set-up (NLP, solver)"), ("solve_s", "solve")):
+        ax[0].loglog(n, [r[k] for r in res["rows"]], "o-", label=f"{label} (exp {res.get('exponents', {}).get(k, np.nan):.2f})")
+    if n.size:
+        ax[0].loglog(n, n / n[0] * res["rows"][0]["calibration_s"], "k:", label="linear from the smallest")
+    ax[0].axhline(10.0, color="r", lw=0.8, ls="--", label="target at 1e5 pings: 10 s")
+    ax[0].set_xlabel("pings")
+    ax[0].set_ylabel("seconds")
+    ax[0].legend(fontsize=7)
+    ax[1].loglog(n, [r["peak_rss_mb"] for r in res["rows"]], "o-",
+                 label=f"peak RSS (exp {res.get('exponents', {}).get('peak_rss_mb', np.nan):.2f})")
+    ax[1].set_xlabel("pings")
+    ax[1].set_ylabel("MB")
+    ax[1].legend(fontsize=7)
+    fig.suptitle(f"calibration cost against run length ({res['scenario']} at ~5 Hz)")
+    fig.tight_layout()
+    save_figure(fig, path)
