@@ -48,6 +48,8 @@ class SolverOptions:
     jit : bool
         Compile the NLP's functions with the system C compiler (CasADi ``jit``).
     print_level : int
+    mu_init : float
+        IPOPT's initial barrier parameter (its default 0.1; about 1e-5 for warm starts).
     """
 
     max_iter: int = 500
@@ -59,6 +61,7 @@ class SolverOptions:
     warm_start: bool = False
     jit: bool = False
     print_level: int = 0
+    mu_init: float = 0.1  # IPOPT's initial barrier; small when the start is already good (warm starts)
 
     def __post_init__(self):
         if self.hessian not in HESSIANS:
@@ -76,6 +79,7 @@ class SolverOptions:
             "ipopt.hessian_approximation": "limited-memory" if self.hessian == "limited-memory" else "exact",
             "ipopt.linear_solver": self.linear_solver,
             "ipopt.nlp_scaling_method": "gradient-based" if self.scaling else "none",
+            "ipopt.mu_init": self.mu_init,
         }
         if self.warm_start:
             opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,

@@ -51,7 +51,7 @@ class DiagnosisConfig:
     gap_z: float = 6.0
     min_gap: float = 0.1
     max_modes: int = 3
-    solver: SolverOptions = SolverOptions(tol=1e-8, max_iter=200, hessian="gauss-newton", expand=False)
+    solver: SolverOptions = SolverOptions(tol=1e-6, max_iter=200, hessian="gauss-newton", expand=False, mu_init=1e-5)
 
     def __post_init__(self):
         for name in self.effects:

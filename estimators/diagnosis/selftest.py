@@ -87,6 +87,8 @@ def summarise(rows: list[dict], labels: list[str]) -> dict:
         "false_alarm_rate": float(np.mean([r["verdict"] != NONE for r in none_rows])) if none_rows else float("nan"),
         "n_effect_free": len(none_rows),
         "every_case_says_where": all(r["where_top"] for r in rows),
+        "remaining_gap_flagged_when_correct": float(np.mean([r["remaining_gap_significant"] for r in with_effect_rows
+                                                             if r["correct"]])) if with_effect_rows else float("nan"),
         "shrink_relative_error_max": float(max(shrink_err)) if shrink_err else float("nan"),
         "shrink_relative_error_median": float(np.median(shrink_err)) if shrink_err else float("nan"),
         "shrink_within_20pct": float(np.mean(np.array(shrink_err) <= 0.2)) if shrink_err else float("nan"),
@@ -106,6 +108,8 @@ def format_summary(s: dict) -> str:
     lines += [f"cases: {s['n_cases']}  top-1 accuracy: {100 * s['top1_accuracy']:.1f}% (target >= 90%)",
               f"false alarms on {s['n_effect_free']} effect-free cases: {100 * s['false_alarm_rate']:.1f}% (target <= 10%)",
               f"every report says where the gap lies: {s['every_case_says_where']}",
+              f"right verdicts that still claim a significant remaining gap: "
+              f"{100 * s['remaining_gap_flagged_when_correct']:.0f}%",
               f"reported vs oracle shrink, relative error: median {s['shrink_relative_error_median']:.3f}, "
               f"max {s['shrink_relative_error_max']:.3f}, within 20%: {100 * s['shrink_within_20pct']:.0f}% of cases"]
     return "\n".join(lines)

@@ -90,7 +90,7 @@ def _words(s: dict) -> str:
     if win.size and np.nanmax(win) > 2.0 * max(np.nanmedian(win), 1e-12) and np.nanmax(win) > 2.0:
         k = int(np.nanargmax(win))
         a, b = s["windows_s"][k]
-        parts.append(f"worst in {a:.0f}-{b:.0f} s (chi2/n = {win[k]:.1f})")
+        parts.append(f"worst in {round(a) + 0:.0f}-{round(b) + 0:.0f} s (chi2/n = {win[k]:.1f})")
     return "; ".join(parts)
 
 

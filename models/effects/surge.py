@@ -1,7 +1,7 @@
 """The navigation speed varies within the run: speed along the heading s(t).
 
 Injected as a sinusoidal speed change; modelled as a cubic B-spline speed with
-``N_COEFFICIENTS`` coefficients spanning the run (about 4.4 s between knots on a
+``N_COEFFICIENTS`` coefficients spanning the run (about 3.2 s between knots on a
 two-minute run; a surge the base's constant speed cannot follow).
 """
 
@@ -13,7 +13,7 @@ from scipy.interpolate import BSpline
 
 from .base import Effect, Parameter
 
-N_COEFFICIENTS = 30
+N_COEFFICIENTS = 40
 
 
 class Surge(Effect):
