@@ -251,7 +251,8 @@ def _suite(suite: str, quick: bool):
 
 
 def run(suite: str, quick: bool, out_dir: Path) -> dict:
-    """Run one suite; print its table and targets; write ``<suite>.json`` and ``<suite>.png``."""
+    """Run one suite; print its table and targets; write ``<suite>.json`` and ``<suite>.png``
+    (``<suite>_quick.*`` in quick mode, so that a quick run never replaces a full one)."""
     if suite not in SUITES:
         raise ValueError(f"suite: expected one of {list(SUITES)}, got {suite!r}")
     tic = time.perf_counter()
@@ -261,7 +262,8 @@ def run(suite: str, quick: bool, out_dir: Path) -> dict:
     show(res)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(res, out_dir / f"{suite}.json")
-    figure(res, out_dir / f"{suite}.png")
-    print(f"\nwrote {out_dir / (suite + '.json')}, {out_dir / (suite + '.png')} ({res['suite_wall_s']:.0f} s)")
+    name = f"{suite}_quick" if quick else suite
+    write_json(res, out_dir / f"{name}.json")
+    figure(res, out_dir / f"{name}.png")
+    print(f"\nwrote {out_dir / (name + '.json')}, {out_dir / (name + '.png')} ({res['suite_wall_s']:.0f} s)")
     return res
