@@ -8,7 +8,6 @@ result says which start reached the best, how many did, and every start's record
 from __future__ import annotations
 
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 
@@ -46,7 +45,8 @@ class SolverOptions:
         Multistart: starts after the first begin from their own x0 but with the first
         start's multipliers and a small barrier parameter (IPOPT warm start).
     jit : bool
-        Compile the NLP's functions with the system C compiler (CasADi ``jit``).
+        Compile the NLP's functions with the system C compiler (CasADi ``jit``; the
+        C source and objects are written in the working folder).
     print_level : int
     """
 
@@ -80,9 +80,8 @@ class SolverOptions:
         if self.warm_start:
             opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                          "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
-        if self.jit:  # objects go to a temporary folder; CasADi leaves the C source in the working folder
-            opts.update({"jit": True, "compiler": "shell", "jit_options": {
-                "flags": ["-O1"], "verbose": False, "directory": tempfile.mkdtemp(prefix="adcpdyn_jit_") + "/"}})
+        if self.jit:  # CasADi writes the C source and the compiled objects in the working folder
+            opts.update({"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"], "verbose": False}})
         return opts
 
 
