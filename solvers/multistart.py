@@ -144,13 +144,19 @@ def expand_problem(nlp: dict, residuals: ca.MX, extra: dict | None = None):
     return sx_nlp, out["residuals"], {k: out[k] for k in extra}
 
 
-def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals=None) -> ca.Function:
+def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals=None,
+                 like: ca.Function | None = None) -> ca.Function:
     """The IPOPT solver Function for an NLP dict.
 
     For ``hessian="gauss-newton"`` pass ``residuals``: the vector e with f = 0.5 |e|^2,
     or directly the Function (x, p) -> de/dx. The Lagrangian Hessian is then
     sigma J^T J (constraint curvature left out, as in CasADi's ``sysid.py`` example),
     formed numerically by :class:`~adcpdyn.solvers.gauss_newton.GaussNewtonHessian`.
+
+    ``like``: a solver already built for the same NLP and options; its derivative
+    Functions (gradient, constraint Jacobian, exact Hessian) are reused instead of being
+    derived again (CasADi evaluates a Function from several threads, each call with its
+    own memory). The Gauss-Newton callback is never shared.
     """
     opts = options.ipopt()
     hessian = options.hessian
@@ -165,6 +171,9 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
         hess = GaussNewtonHessian(jac, nlp["g"].shape[0])
         opts["hess_lag"] = hess
         _KEEP_ALIVE.append(hess)  # the callback must outlive the solver
+    if like is not None:
+        shared = [("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g")] + ([("hess_lag", "nlp_hess_l")] if hessian == "exact" else [])
+        opts.update({opt: like.get_function(fn) for opt, fn in shared if like.has_function(fn)})
     return ca.nlpsol(name, "ipopt", nlp, opts)
 
 
