@@ -21,8 +21,8 @@ test: $(STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
-	$(VENV)/bin/adcpdyn bench correction --quick --out benchmarks/results
-	$(VENV)/bin/adcpdyn bench calibration --quick --out benchmarks/results
+	@for suite in correction calibration formulations solvers scale; do \
+		$(VENV)/bin/adcpdyn bench $$suite --quick --out benchmarks/results || exit 1; done
 
 clean:
 	rm -rf $(VENV) demo_out build *.egg-info

@@ -137,15 +137,19 @@ def _solve(A, b, beam_dirs_t, beams_allowed):
 
 def _rootfind(case: Case, geo: dict, V, err, n_good):
     """Exact four-beam solve of every complete ping, started from the closed form."""
-    from ..solvers.rootfinder import doppler_rootfinder, error_direction, pack
+    from ..solvers.rootfinder import NEWTON_RESIDUAL_TOL, doppler_newton, doppler_rootfinder, error_direction, pack
 
     full = np.flatnonzero(n_good == 4)
     if full.size == 0:
         return V, err
     _, e_row = beam_to_instrument(case.instrument.beam_directions())
-    rf = doppler_rootfinder(error_direction(e_row), case.instrument.sound_speed_m_s, full.size)
+    n_dir, c = error_direction(e_row), case.instrument.sound_speed_m_s
     p = pack(geo["d_T"][full], geo["d_R"][full], geo["u_T"][full], geo["u_R"][full], case.pings.bt_radial_m_s[full])
-    x = np.asarray(rf(np.vstack([V[full].T, err[full][None, :]]), p))
+    x0 = np.vstack([V[full].T, err[full][None, :]])
+    x, res = (np.asarray(a) for a in doppler_newton(n_dir, c, full.size)(x0, p))
+    slow = np.flatnonzero(~(res.ravel() <= NEWTON_RESIDUAL_TOL))  # not converged in the fixed steps (or NaN)
+    if slow.size:
+        x[:, slow] = np.asarray(doppler_rootfinder(n_dir, c, slow.size)(x0[:, slow], p[:, slow]))
     V, err = V.copy(), err.copy()
     V[full], err[full] = x[:3].T, x[3]
     return V, err

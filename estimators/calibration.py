@@ -550,7 +550,7 @@ class CalibrationProblem:
         cfg = self.config
         x0s = self.start_points(cfg.n_starts, cfg.seed)
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
-        make = lambda: build_solver(self.nlp, cfg.solver, "calibration", residuals=self.jacobian_fun)
+        make = lambda: build_solver(self.nlp, cfg.solver, "calibration", residuals=self.jacobian_fun, like=self.solver)
         ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
                         make_solver=make, warm_start=cfg.solver.warm_start)
         if cfg.estimate_noise:

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -63,14 +65,19 @@ def _child(starts: int, seed: int, options: str) -> None:
 
 
 def _row_in_child(starts, seed, opts: SolverOptions, time_limit_s: float) -> dict | None:
+    """The variant's row from a child process, or None when it fails or outlasts the limit
+    (the child's whole process group, compiler included, is then killed)."""
     code = f"from adcpdyn.solvers.bench_solvers import _child; _child({starts}, {seed}, {json.dumps(json.dumps(dataclasses.asdict(opts)))})"
-    try:
-        with tempfile.TemporaryDirectory(prefix="adcpdyn_jit_") as cwd:  # the C source lands in the working folder
-            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=time_limit_s,
-                                 cwd=cwd)
-    except subprocess.TimeoutExpired:
-        return None
-    return json.loads(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 and out.stdout.strip() else None
+    with tempfile.TemporaryDirectory(prefix="adcpdyn_jit_") as cwd:  # the C source and objects land here
+        proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                cwd=cwd, start_new_session=True)
+        try:
+            out, _ = proc.communicate(timeout=time_limit_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+            return None
+    return json.loads(out.strip().splitlines()[-1]) if proc.returncode == 0 and out.strip() else None
 
 
 def bench_solvers(starts: int, seed: int = 1, jit: bool = True, jit_time_limit_s: float = 300.0) -> dict:

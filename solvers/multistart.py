@@ -8,7 +8,6 @@ result says which start reached the best, how many did, and every start's record
 from __future__ import annotations
 
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 
@@ -46,7 +45,8 @@ class SolverOptions:
         Multistart: starts after the first begin from their own x0 but with the first
         start's multipliers and a small barrier parameter (IPOPT warm start).
     jit : bool
-        Compile the NLP's functions with the system C compiler (CasADi ``jit``).
+        Compile the NLP's functions with the system C compiler (CasADi ``jit``; the
+        C source and objects are written in the working folder).
     print_level : int
     mu_init : float
         IPOPT's initial barrier parameter (its default 0.1; about 1e-5 for warm starts).
@@ -84,9 +84,8 @@ class SolverOptions:
         if self.warm_start:
             opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                          "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
-        if self.jit:  # objects go to a temporary folder; CasADi leaves the C source in the working folder
-            opts.update({"jit": True, "compiler": "shell", "jit_options": {
-                "flags": ["-O1"], "verbose": False, "directory": tempfile.mkdtemp(prefix="adcpdyn_jit_") + "/"}})
+        if self.jit:  # CasADi writes the C source and the compiled objects in the working folder
+            opts.update({"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"], "verbose": False}})
         return opts
 
 
@@ -149,13 +148,19 @@ def expand_problem(nlp: dict, residuals: ca.MX, extra: dict | None = None):
     return sx_nlp, out["residuals"], {k: out[k] for k in extra}
 
 
-def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals=None) -> ca.Function:
+def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals=None,
+                 like: ca.Function | None = None) -> ca.Function:
     """The IPOPT solver Function for an NLP dict.
 
     For ``hessian="gauss-newton"`` pass ``residuals``: the vector e with f = 0.5 |e|^2,
     or directly the Function (x, p) -> de/dx. The Lagrangian Hessian is then
     sigma J^T J (constraint curvature left out, as in CasADi's ``sysid.py`` example),
     formed numerically by :class:`~adcpdyn.solvers.gauss_newton.GaussNewtonHessian`.
+
+    ``like``: a solver already built for the same NLP and options; its derivative
+    Functions (gradient, constraint Jacobian, exact Hessian) are reused instead of being
+    derived again (CasADi evaluates a Function from several threads, each call with its
+    own memory). The Gauss-Newton callback is never shared.
     """
     opts = options.ipopt()
     hessian = options.hessian
@@ -170,6 +175,9 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
         hess = GaussNewtonHessian(jac, nlp["g"].shape[0])
         opts["hess_lag"] = hess
         _KEEP_ALIVE.append(hess)  # the callback must outlive the solver
+    if like is not None:
+        shared = [("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g")] + ([("hess_lag", "nlp_hess_l")] if hessian == "exact" else [])
+        opts.update({opt: like.get_function(fn) for opt, fn in shared if like.has_function(fn)})
     return ca.nlpsol(name, "ipopt", nlp, opts)
 
 
