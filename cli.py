@@ -219,6 +219,9 @@ def cmd_calibrate(args) -> int:
         cells = "  ".join(f"{v:+.4f} +- {s:.4f}" if np.isfinite(s) else "  (not determined)  "
                           for v, s in zip(result.lever_arms_sensor_m[i], result.lever_arms_sensor_se_m[i]))
         print(f"  r{i + 1}: {cells}")
+    if np.isfinite(result.heading_misalignment_se_rad):
+        print(f"heading misalignment against the reference (deg): {np.rad2deg(result.heading_misalignment_rad):+.4f} "
+              f"+- {np.rad2deg(result.heading_misalignment_se_rad):.4f}")
     if result.installation_determined:
         print("installation yaw/pitch/roll (deg): " + ", ".join(
             f"{np.rad2deg(v):+.4f} +- {np.rad2deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad)))

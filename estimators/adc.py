@@ -24,6 +24,8 @@ velocity.
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 
 import numpy as np
@@ -171,6 +173,20 @@ def lever_arms_from_calibration(calibration: dict, case: Case) -> tuple[np.ndarr
     return arr("radius_vectors_m"), arr("installation_ypr_rad")
 
 
+def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
+    """The case with a head sensor's heading readings turned by the calibration's heading misalignment.
+
+    For a sensor inside the head, the misalignment found against the reference (compass error,
+    magnetic declination) is an Earth-frame heading offset, Rz(d) Lambda = Lambda(psi + d): it is
+    applied to the readings, like TRDI's heading bias (EB). Other cases are returned unchanged.
+    """
+    delta = None if calibration is None else calibration.get("heading_misalignment_rad")
+    if delta is None or case.attitude.frame != "transducer":
+        return case
+    att = dataclasses.replace(case.attitude, heading_rad=case.attitude.heading_rad + float(delta))
+    return case.replace(attitude=att)
+
+
 def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None = None,
                        attitude: AttitudeParams | None = None, timing: str = "deep") -> Correction:
     """Correct every ping of a case (see module docstring).
@@ -200,6 +216,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     else:
         if calibration is None:
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
+        case = with_heading_misalignment(case, calibration)
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"

@@ -144,6 +144,9 @@ class CalibrationResult:
     config: CalibrationConfig
     velocity_knots_s: np.ndarray | None = None
     velocity_knots_m_s: np.ndarray | None = None
+    # head sensor on a moving run: true heading = sensor heading + this (compass error, declination), found against the reference
+    heading_misalignment_rad: float = float("nan")
+    heading_misalignment_se_rad: float = float("inf")
     warnings: list = field(default_factory=list)
 
     @property
@@ -162,6 +165,9 @@ class CalibrationResult:
             "installation_ypr_assumed_rad": self.installation_ypr_rad.tolist(),
             "installation_ypr_se_rad": self.installation_ypr_se_rad.tolist(),
             "installation_determined": self.installation_determined,
+            "heading_misalignment_rad": (self.heading_misalignment_rad
+                                         if np.isfinite(self.heading_misalignment_se_rad) else None),
+            "heading_misalignment_se_rad": self.heading_misalignment_se_rad,
             "attitude_frame": self.attitude_frame,
             "attitude_model": self.attitude.to_dict(),
             "objective": self.objective,
@@ -291,8 +297,19 @@ class CalibrationProblem:
             p_att = ca.MX.sym("attitude", layout.size)
             att_names, att_scale, att_lo, att_hi = self._attitude_bounds(self.fit.params)
             add(p_att, att_names, att_scale, att_lo, att_hi)
-        self.fixed_installation = self.head_sensor or self.two_stage
-        if self.head_sensor:
+        # A head sensor fixes no installation angle from the attitude, but against a moving reference its
+        # heading misalignment (compass error, declination: an Earth-frame heading offset) is observable.
+        ref = case.reference
+        self.head_yaw = bool(self.head_sensor and not self.two_stage and ref is not None and not ref.stationary
+                         and ref.velocity_m_s is not None)
+        self.fixed_installation = (self.head_sensor and not self.head_yaw) or self.two_stage
+        self.yaw_guess = self._yaw_guess() if self.head_yaw else 0.0
+        heading_offset = None
+        if self.head_yaw:  # Earth-frame heading offset: true Earth = Rz(d) (the sensor's Earth); beams stay put
+            heading_offset = ca.MX.sym("heading_misalignment", 1)
+            add(heading_offset, ["heading_misalignment"], [0.02], [self.yaw_guess - np.pi], [self.yaw_guess + np.pi])
+            ypr_st = ca.vertcat(heading_offset, ca.MX.zeros(2))  # reported with the angles; the beams use zeros
+        elif self.head_sensor:
             ypr_st = ca.MX(ca.DM.zeros(3))
         elif self.two_stage:
             ypr_st = ca.MX(ca.DM(np.asarray(config.nominal_installation_ypr_rad, dtype=float)))
@@ -300,7 +317,8 @@ class CalibrationProblem:
             ypr_st = ca.MX.sym("installation", 3)
             b = config.installation_bound_rad
             add(ypr_st, list(ANGLE_NAMES), [0.02] * 3, [-b] * 3, [b] * 3)
-        Lst = euler_matrix(ypr_st[0], ypr_st[1], ypr_st[2])
+        ypr_beams = ca.MX(ca.DM.zeros(3)) if self.head_yaw else ypr_st
+        Lst = euler_matrix(ypr_beams[0], ypr_beams[1], ypr_beams[2])
         self.lever = lever_block(config.formulation, Lst, self.pos_t, config.epsilon_rel)
         nl = len(self.lever.names)
         add(self.lever.x, self.lever.names, [self.lever_box / 5] * nl, [-self.lever_box] * nl, [self.lever_box] * nl)
@@ -349,7 +367,7 @@ class CalibrationProblem:
         depth = case.environment.depth_at_pings(N)
         g_depth = case.environment.transducer_depth_m - ca.sum1(self.lever.r[:, 2]) / 4
         radial, rng = bt_fun(ca.DM(pings.time_s).T, ca.DM(depth).T, g_depth, case.instrument.sound_speed_m_s,
-                             v_ping.T, p_att, self.lever.r, ypr_st, ca.DM(self.beam_dirs_t))
+                             v_ping.T, p_att, self.lever.r, ypr_beams, ca.DM(self.beam_dirs_t))
         bt = pings.bt_radial_m_s
         self.bt_mask = np.isfinite(bt)
         for i in range(4):
@@ -369,9 +387,12 @@ class CalibrationProblem:
             if self.head_sensor:  # dLambda p = dLambda_h Lambda_tb^T p with the nominal Lambda_tb
                 p_ref = np.asarray(euler_matrix(*config.nominal_installation_ypr_rad)).T @ p_ref
             v_ref_model = ca.mtimes(ca.DM(_hat_basis(ref.time_s, self.knots)), V) if V is not None else ca.MX(L, 3)
+            v_sensor = [v_ref_model[:, j] + ca.mtimes(ca.reshape(dLam[j, :], 3, L).T, ca.DM(p_ref)) for j in range(3)]
+            if heading_offset is not None:  # the reference lives in the true Earth frame
+                cos_d, sin_d = ca.cos(heading_offset), ca.sin(heading_offset)
+                v_sensor[:2] = [cos_d * v_sensor[0] - sin_d * v_sensor[1], sin_d * v_sensor[0] + cos_d * v_sensor[1]]
             for j in range(3):
-                tang = ca.mtimes(ca.reshape(dLam[j, :], 3, L).T, ca.DM(p_ref))
-                models.append(v_ref_model[:, j] + tang - np.nan_to_num(ref.velocity_m_s[:, j]))
+                models.append(v_sensor[j] - np.nan_to_num(ref.velocity_m_s[:, j]))
                 self.channels.append((f"reference_{AXES[j]}", L))
         raw = ca.vertcat(*models)
         self.masks = self._masks()
@@ -421,6 +442,20 @@ class CalibrationProblem:
             scale[i], lo[i], hi[i] = 0.01, -np.pi / 2, np.pi / 2
         scale[s["yaw_trend"]] = [1.0 if k == 0 else 0.01**k for k in range(lay.yaw_trend_order + 1)]
         return names, scale.tolist(), lo.tolist(), hi.tolist()
+
+    def _yaw_guess(self) -> float:
+        """Course of the reference minus course of the static (ASC) bottom-track velocity, radians."""
+        from .asc import asc
+
+        ref = self.case.reference
+        v = asc(self.case).vessel_velocity_m_s
+        t = self.case.pings.time_s
+        g = np.column_stack([np.interp(t, ref.time_s, ref.velocity_m_s[:, j]) for j in range(2)])
+        ok = np.all(np.isfinite(v[:, :2]), axis=1) & np.all(np.isfinite(g), axis=1) & (np.hypot(*g.T) > 0.1)
+        if ok.sum() < 3:
+            return 0.0
+        d = np.arctan2(g[ok, 1], g[ok, 0]) - np.arctan2(v[ok, 1], v[ok, 0])
+        return float(np.angle(np.mean(np.exp(1j * d))))
 
     def _default_knot_interval(self) -> float:
         ref = self.case.reference
@@ -474,11 +509,12 @@ class CalibrationProblem:
     def start_points(self, n_starts: int, seed: int) -> np.ndarray:
         """Pre-fit start, empirical-guess start, then a Latin hypercube over the start region."""
         rng = np.random.default_rng(seed)
-        base = self._x_from(self.fit.params, np.zeros(3), self._centre_guess())
+        angles0 = np.array([self.yaw_guess, 0.0, 0.0])
+        base = self._x_from(self.fit.params, angles0, self._centre_guess())
         starts = [base]
         emp = self._empirical_params()
         if emp is not None and n_starts > 1:
-            starts.append(self._x_from(emp, np.zeros(3), self._centre_guess()))
+            starts.append(self._x_from(emp, angles0, self._centre_guess()))
         n_design = n_starts - len(starts)
         if n_design > 0:
             dims = 3 + 3 + 2  # centre P, angles, frequency and decay jitter
@@ -486,6 +522,8 @@ class CalibrationProblem:
             for row in u:
                 centre = row[:3] * self.lever_box
                 angles = np.zeros(3) if self.fixed_installation else row[3:6] * self.config.installation_bound_rad
+                if self.head_yaw:
+                    angles = np.array([self.yaw_guess + angles[0], 0.0, 0.0])
                 starts.append(self._x_from(self._jitter(self.fit.params, row[6], row[7]), angles, centre))
         x0 = np.array(starts)
         x0 = np.clip(x0, self.lbx, self.ubx)
@@ -517,7 +555,9 @@ class CalibrationProblem:
 
     def _x_from(self, params: AttitudeParams, angles, centre) -> np.ndarray:
         parts = [] if self.two_stage else [params.pack()]
-        if not self.fixed_installation:
+        if self.head_yaw:
+            parts.append(np.asarray(angles, dtype=float)[:1])
+        elif not self.fixed_installation:
             parts.append(np.asarray(angles, dtype=float))
         elif self.two_stage and not self.head_sensor:
             angles = np.asarray(self.config.nominal_installation_ypr_rad, dtype=float)
@@ -582,7 +622,7 @@ class CalibrationProblem:
         J = np.asarray(self.jacobian_fun(ms.x, w))
         r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
-        Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))  # noqa: E501
+        Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))
         unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale,
                           {"beam_dirs_sensor": self.beam_dirs_t @ Lst.T, "frame": self.frame})
         se_x = unc.se_z * self.scale
@@ -612,9 +652,19 @@ class CalibrationProblem:
             radius = r_s @ Ltb.T
             radius_se = np.sqrt((se_r**2) @ (Ltb.T**2))
             ypr, ypr_se = nominal, np.full(3, np.inf)
-            warn.append("attitude sensor inside the ADCP head: the data fix only the head-frame lever arms "
-                        "(radius_vectors_head_m = Lambda_tb^T r); installation angles are not determined and need "
-                        "another source (nominal mounting, GNSS on a moving run); radius_vectors_m uses the nominal angles")
+            if self.head_yaw:
+                misalignment = float(np.asarray(st).ravel()[0])
+                misalignment_se = float(se_st.ravel()[0]) if unc.determined_mask(Jst[:1]).all() else np.inf
+                warn.append("attitude sensor inside the ADCP head: installation angles are not determined; the heading "
+                            "misalignment (yaw of the beams relative to the heading sensor: compass error, heading "
+                            "alignment) is found against the moving reference; the data fix the head-frame lever arms "
+                            "(radius_vectors_head_m); radius_vectors_m uses the nominal angles")
+                if not np.isfinite(misalignment_se):
+                    warn.append("heading misalignment against the reference is not determined (too little motion over ground)")
+            else:
+                warn.append("attitude sensor inside the ADCP head: the data fix only the head-frame lever arms "
+                            "(radius_vectors_head_m = Lambda_tb^T r); installation angles are not determined and need "
+                            "another source (nominal mounting, GNSS on a moving run); radius_vectors_m uses the nominal angles")
         else:
             radius, radius_se = r_s, se_r
             ypr, ypr_se = np.asarray(st).ravel(), se_st.ravel()
@@ -625,6 +675,8 @@ class CalibrationProblem:
                 ypr_se[~unc.determined_mask(Jst)] = np.inf
         for msg in warn:
             warnings.warn(msg, stacklevel=3)
+        if not self.head_yaw:
+            misalignment, misalignment_se = float("nan"), float("inf")
         vk = None
         if self.knots is not None:
             k = len(self.knots)
@@ -636,7 +688,8 @@ class CalibrationProblem:
             objective=float(ms.objective), max_constraint_violation=viol, formulation=self.config.formulation,
             timing=self.timing, noise_sigma=dict(self.sigma), chi2_per_channel=chi2, multistart=ms, uncertainty=unc,
             x_names=list(self.names), x=x, x_se=se_x, config=self.config,
-            velocity_knots_s=self.knots, velocity_knots_m_s=vk, warnings=warn,
+            velocity_knots_s=self.knots, velocity_knots_m_s=vk, heading_misalignment_rad=misalignment,
+            heading_misalignment_se_rad=misalignment_se, warnings=warn,
         )
 
 def calibrate(case: Case, config: CalibrationConfig | None = None) -> CalibrationResult:

@@ -18,9 +18,10 @@ def installation_from(calibration: dict) -> np.ndarray:
 
 
 def correct_case(case: Case, method: str, calibration: dict | None):
-    """``asc`` (installation angles from the calibration for vessel-frame sensors) or a
+    """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
+    sensor, its heading misalignment) or a
     dynamic method of :func:`~adcpdyn.estimators.adc.dynamic_correction`."""
-    from .adc import dynamic_correction
+    from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
     if method not in CORRECTION_METHODS:
@@ -29,5 +30,5 @@ def correct_case(case: Case, method: str, calibration: dict | None):
         ypr = None
         if calibration is not None and case.attitude.frame == "vessel":
             ypr = installation_from(calibration)
-        return asc(case, ypr)
+        return asc(with_heading_misalignment(case, calibration), ypr)
     return dynamic_correction(case, method, calibration)

@@ -113,6 +113,34 @@ def test_vessel_frame_installation_yaw_against_reference():
     assert r.installation_ypr_se_rad[0] < np.deg2rad(0.1)
 
 
+def test_head_sensor_heading_misalignment_against_reference_and_applied_by_correct():
+    """A head compass reading 25 degrees too far clockwise: calibration finds -25 degrees and the
+    static correction with that CALIB.json follows the true course, while without it it does not."""
+    from adcpdyn.estimators.correct_case import correct_case
+
+    offset = np.deg2rad(25.0)
+    sc = get_scenario("diag_boat")
+    mounting = dataclasses.replace(sc.platform.mounting, attitude_frame="transducer")
+    effect = {"name": "compass_deviation", "params": {"A_rad": offset, "B_rad": 0.0, "C_rad": 0.0}}
+    sc = dataclasses.replace(sc, platform=dataclasses.replace(sc.platform, mounting=mounting),
+                             run=dataclasses.replace(sc.run, effects=(effect,)))
+    case = simulate(sc, seed=3)
+    r = _quiet_calibrate(case, n_starts=2)
+    assert r.success and not r.installation_determined
+    assert abs(r.heading_misalignment_rad + offset) < Z_MAX * r.heading_misalignment_se_rad
+    assert r.heading_misalignment_se_rad < np.deg2rad(0.5)
+    calib = json.loads(json.dumps(r.to_dict()))
+    truth = case.truth.vessel_velocity_m_s[:, :2]
+    course_error = {}
+    for name, c in (("with", calib), ("without", {k: v for k, v in calib.items() if k != "heading_misalignment_rad"})):
+        v = correct_case(case, "asc", c).vessel_velocity_m_s[:, :2]
+        ok = np.all(np.isfinite(v), axis=1)
+        cross = np.sum(truth[ok, 0] * v[ok, 1] - truth[ok, 1] * v[ok, 0])
+        course_error[name] = np.arctan2(cross, np.sum(truth[ok] * v[ok]))
+    assert abs(course_error["with"]) < np.deg2rad(1.0)
+    assert abs(course_error["without"] - offset) < np.deg2rad(1.0)
+
+
 def test_deep_measurement_model_matches_independent_simulator():
     """The estimator's Eq. 68-70 model with the true parameters against the simulator's exact echoes."""
     sc = noise_free(get_scenario("deep_ocean"))
