@@ -154,7 +154,12 @@ def cmd_compare(args) -> int:
     methods = [m for m in CORRECTION_METHODS if m != "oracle" or case.truth is not None]
     if calibration is None:
         methods = [m for m in methods if m in ("asc", "oracle")]
-    results = {m: _correct(case, m, calibration) for m in methods}
+    results, not_run = {}, {}
+    for m in methods:  # a method this calibration cannot drive is reported, not fatal to the others
+        try:
+            results[m] = _correct(case, m, calibration)
+        except ValueError as err:
+            not_run[m] = str(err)
     if case.truth is not None:
         reference, label = case.truth.vessel_velocity_m_s, "truth"
     elif case.reference is not None and case.reference.velocity_m_s is not None:
@@ -167,11 +172,15 @@ def cmd_compare(args) -> int:
     table[label] = velocity_metrics(case.pings.time_s, reference, reference)
     print(f"{case.name}: vessel velocity against {label}")
     print(format_table(table))
+    for m, why in not_run.items():
+        print(f"{m}: not run: {why}")
     if args.out:
+        from .cases.atomic import atomic_path
+
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        with open(out / f"{case.name}_compare.json", "w") as fh:
-            json.dump(table, fh, indent=2)
+        with atomic_path(out / f"{case.name}_compare.json") as tmp, open(tmp, "w") as fh:
+            json.dump({**table, "not_run": not_run}, fh, indent=2)
         velocity_figure(case.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, reference,
                         f"{case.name}: corrections against {label}", out / f"{case.name}_compare.png")
         print(f"saved {out / (case.name + '_compare.png')}, {out / (case.name + '_compare.json')}")

@@ -632,6 +632,9 @@ class CalibrationProblem:
         se_st = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Jst, cov_z, Jst), 0)) if Jst.size else np.zeros(3)
         r_s = r_flat.reshape(4, 3)
         se_r[~unc.determined_mask(Jr).reshape(4, 3)] = np.inf
+        # held by the search box, or known no better than the box: the bound, not the data, set the number
+        box_held = (np.abs(r_s) >= 0.999 * self.lever_box) | (se_r > self.lever_box)
+        se_r[box_held] = np.inf
         sl = self.channel_slices()
         chi2 = {}
         for ch, s in sl.items():
@@ -644,6 +647,9 @@ class CalibrationProblem:
         x = ms.x * self.scale
         p_att = self.fit.params if self.two_stage else AttitudeParams.unpack(x[: self.layout.size], self.layout)
         warn = list(unc.warnings)
+        if box_held.any():
+            warn.append(f"{int(box_held.sum())} lever-arm component(s) held by the search box (+-{self.lever_box:g} m) or "
+                        f"known no better than it: not determined by this run (too little rotation), reported as null")
         if not ms.success:
             warn.append(f"solver did not converge: {ms.status}")
         if self.head_sensor:
@@ -656,8 +662,8 @@ class CalibrationProblem:
                 misalignment = float(np.asarray(st).ravel()[0])
                 misalignment_se = float(se_st.ravel()[0]) if unc.determined_mask(Jst[:1]).all() else np.inf
                 warn.append("attitude sensor inside the ADCP head: installation angles are not determined; the heading "
-                            "misalignment (yaw of the beams relative to the heading sensor: compass error, heading "
-                            "alignment) is found against the moving reference; the data fix the head-frame lever arms "
+                            "misalignment (an Earth-frame heading offset: compass error, declination; true heading = "
+                            "sensor heading + misalignment) is found against the moving reference; the data fix the head-frame lever arms "
                             "(radius_vectors_head_m); radius_vectors_m uses the nominal angles")
                 if not np.isfinite(misalignment_se):
                     warn.append("heading misalignment against the reference is not determined (too little motion over ground)")

@@ -179,3 +179,40 @@ def test_import_refuses_to_overwrite_input(tmp_path, capsys):
     assert main(["import", str(src), "--out", str(src)]) == 2
     assert "inputs are never overwritten" in capsys.readouterr().err
     assert src.read_bytes() == real("RiverPro_test01.PD0").read_bytes()
+
+
+def _calibrated_misalignment(case) -> tuple[float, float]:
+    import warnings
+
+    from adcpdyn.estimators.calibration import CalibrationConfig, calibrate
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = calibrate(case, CalibrationConfig(n_starts=2, timing="shallow"))
+    assert r.success
+    return r.heading_misalignment_rad, r.heading_misalignment_se_rad
+
+
+def test_real_heading_misalignment_follows_a_turned_reference(imported):
+    """On a real moving-boat file, turning the GNSS velocities by 40 degrees turns the calibrated
+    heading misalignment by 40 degrees (within 3 SE), and the untouched file's misalignment agrees
+    with the importer's BT-vs-GNSS course offset (an independent, model-free route) within 3 degrees."""
+    import dataclasses
+
+    case, attrs = imported("RiverPro_test01.PD0")
+    d0, se0 = _calibrated_misalignment(case)
+    assert abs(np.rad2deg(d0) - attrs["/provenance"]["bt_vs_gnss_course_offset_gnss_minus_bt_deg"]) < 3.0
+    turn = np.deg2rad(40.0)
+    R = np.asarray(euler_matrix(turn, 0.0, 0.0))
+    ref = dataclasses.replace(case.reference, velocity_m_s=case.reference.velocity_m_s @ R.T)
+    d1, se1 = _calibrated_misalignment(case.replace(reference=ref))
+    assert abs((d1 - d0) - turn) < 3 * np.hypot(se0, se1)
+
+
+def test_real_file_runs_through_diagnose(imported, tmp_path):
+    from adcpdyn.estimators.diagnosis import DiagnosisConfig, diagnose
+
+    case, _ = imported("RiverPro_test01.PD0")
+    result = diagnose(case, DiagnosisConfig(effects=("surge", "installation_misalignment")))
+    assert result.verdict in ("surge", "installation_misalignment", "none")
+    assert result.where and np.isfinite(result.gap_before)
