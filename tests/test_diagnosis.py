@@ -141,3 +141,11 @@ def test_effect_outside_the_tried_catalog_is_reported_as_a_remaining_gap():
     assert "significant gap remains" in r.statement
     assert r.where[0]["channel"].startswith("bt_beam")
     assert abs(r.where[0]["peak_rad_s"] - params["omega_rad_s"]) < 0.05
+
+
+def test_case_without_attitude_is_refused_in_one_line():
+    case = simulate(get_scenario("pool_m0"), seed=1)
+    flat = dataclasses.replace(case.attitude, heading_rad=0 * case.attitude.heading_rad,
+                               pitch_rad=0 * case.attitude.pitch_rad, roll_rad=0 * case.attitude.roll_rad)
+    with pytest.raises(ValueError, match="/attitude: heading, pitch and roll never change"):
+        diagnose(case.replace(attitude=flat))

@@ -229,6 +229,10 @@ def fit_base(case: Case, config: DiagnosisConfig, calibration: dict | None = Non
 def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibration: dict | None = None,
              progress=None) -> DiagnosisResult:
     """Diagnose the gap between the base model and one case, blind to its truth."""
+    ypr = case.attitude.ypr()
+    if ypr.shape[0] < 3 or np.all(np.ptp(ypr, axis=0) == 0):
+        raise ValueError(f"{case.name}: /attitude: heading, pitch and roll never change (no attitude recorded?); "
+                         "the gap diagnosis needs a measured attitude")
     af, att, base_model, base, sigma_fit = fit_base(case, config, calibration)
     peaks = residual_peaks(case, base.raw, base_model)
     fits = {"base": (base_model, base)}
