@@ -339,10 +339,7 @@ def cmd_diagnose(args) -> int:
 
     refuse_overwrite_input(args.out, args.case, args.calibration)
     case = _read(args.case)
-    calibration = None
-    if args.calibration:
-        with open(args.calibration) as fh:
-            calibration = json.load(fh)
+    calibration = _load_calibration(args.calibration)
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
     result = diagnose(case, config, calibration=calibration)
     paths = write_report(result, args.out)

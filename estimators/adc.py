@@ -25,7 +25,6 @@ velocity.
 from __future__ import annotations
 
 import dataclasses
-
 import json
 
 import numpy as np

@@ -30,7 +30,7 @@ from ..cases.case import Case
 from ..models.janus import beam_to_instrument
 from ..models.measurement import bottom_track_function
 from ..models.motion import AttitudeLayout, AttitudeParams, attitude_function
-from ..models.rotations import euler_matrix
+from ..models.rotations import course_difference_rad, euler_matrix
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from .attitude_fit import AttitudeFit, fit_attitude
 from .formulations import AXES, FORMULATIONS, lever_block
@@ -454,8 +454,7 @@ class CalibrationProblem:
         ok = np.all(np.isfinite(v[:, :2]), axis=1) & np.all(np.isfinite(g), axis=1) & (np.hypot(*g.T) > 0.1)
         if ok.sum() < 3:
             return 0.0
-        d = np.arctan2(g[ok, 1], g[ok, 0]) - np.arctan2(v[ok, 1], v[ok, 0])
-        return float(np.angle(np.mean(np.exp(1j * d))))
+        return float(np.angle(np.mean(np.exp(1j * course_difference_rad(g[ok], v[ok])))))
 
     def _default_knot_interval(self) -> float:
         ref = self.case.reference
@@ -499,11 +498,7 @@ class CalibrationProblem:
         return w * self.masks
 
     def channel_slices(self) -> dict:
-        out, k = {}, 0
-        for ch, n in self.channels:
-            out[ch] = slice(k, k + n)
-            k += n
-        return out
+        return channel_slices(self.channels)
 
     # ------------------------------------------------------------------ starts
     def start_points(self, n_starts: int, seed: int) -> np.ndarray:
@@ -652,6 +647,7 @@ class CalibrationProblem:
                         f"known no better than it: not determined by this run (too little rotation), reported as null")
         if not ms.success:
             warn.append(f"solver did not converge: {ms.status}")
+        misalignment, misalignment_se = float("nan"), float("inf")
         if self.head_sensor:
             nominal = np.asarray(self.config.nominal_installation_ypr_rad, dtype=float)
             Ltb = np.asarray(euler_matrix(*nominal))
@@ -681,8 +677,6 @@ class CalibrationProblem:
                 ypr_se[~unc.determined_mask(Jst)] = np.inf
         for msg in warn:
             warnings.warn(msg, stacklevel=3)
-        if not self.head_yaw:
-            misalignment, misalignment_se = float("nan"), float("inf")
         vk = None
         if self.knots is not None:
             k = len(self.knots)
@@ -697,6 +691,12 @@ class CalibrationProblem:
             velocity_knots_s=self.knots, velocity_knots_m_s=vk, heading_misalignment_rad=misalignment,
             heading_misalignment_se_rad=misalignment_se, warnings=warn,
         )
+
+def channel_slices(channels: list[tuple[str, int]]) -> dict:
+    """Slice of each channel in the stacked residual vector, from (name, length) in stacking order."""
+    ends = np.cumsum([n for _, n in channels])
+    return {ch: slice(int(end - n), int(end)) for (ch, n), end in zip(channels, ends)}
+
 
 def calibrate(case: Case, config: CalibrationConfig | None = None) -> CalibrationResult:
     """Joint calibration of one case (see module docstring)."""

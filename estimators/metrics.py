@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..models.rotations import course_difference_rad
+
 
 def _trapezoid_displacement(t, v):
     return np.trapezoid(v, t, axis=0)
@@ -30,7 +32,7 @@ def velocity_metrics(time_s, estimate_m_s, reference_m_s) -> dict[str, float]:
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.abs(err) / s_ref
     moving = s_ref > 1e-3
-    dang = np.angle(np.exp(1j * (np.arctan2(est[:, 1], est[:, 0]) - np.arctan2(ref[:, 1], ref[:, 0]))))
+    dang = course_difference_rad(est, ref)
     d_est = np.linalg.norm(_trapezoid_displacement(t, est[:, :2]))
     d_ref = np.linalg.norm(_trapezoid_displacement(t, ref[:, :2]))
     return {

@@ -13,6 +13,7 @@ so the same code builds NLPs and evaluates numbers.
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 
 def rot_x(phi):
@@ -85,3 +86,9 @@ def euler_matrices(ypr):
     a = ca.SX.sym("ypr", 3)
     fun = ca.Function("euler", [a], [euler_matrix(a[0], a[1], a[2])]).map(n)
     return np.asarray(fun(ypr.T)).reshape(3, n, 3).transpose(1, 0, 2)
+
+
+def course_difference_rad(a, b) -> np.ndarray:
+    """Horizontal course of velocities ``a`` minus that of ``b`` (rows of north, east, ...), wrapped to (-pi, pi]."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return np.angle(np.exp(1j * (np.arctan2(a[:, 1], a[:, 0]) - np.arctan2(b[:, 1], b[:, 0]))))

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...models.rotations import course_difference_rad
+
 KNOT_M_S = 1852.0 / 3600.0
 DOLFYN_KNOT_DIVISOR = 1.944  # dolfyn stores VTG speed as knots / 1.944
 WGS84_A, WGS84_E2 = 6378137.0, 6.69437999014e-3
@@ -232,7 +234,7 @@ def compare(track: GnssTrack, offset_s: float, t_adcp_s, v_bt_ned, min_speed_m_s
     if m.sum() < 3:
         return {"n": int(m.sum())}
     sb, sg = np.hypot(w[m, 0], w[m, 1]), np.hypot(g[m, 0], g[m, 1])
-    d = np.arctan2(g[m, 1], g[m, 0]) - np.arctan2(w[m, 1], w[m, 0])
+    d = course_difference_rad(g[m], w[m])
     z = np.mean(np.exp(1j * d))
     sd = np.sqrt(-2 * np.log(min(abs(z), 1.0)))
     return {"n": int(m.sum()), "speed_ratio_bt_over_gnss": float(np.sum(sb) / np.sum(sg)),

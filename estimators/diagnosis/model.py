@@ -26,6 +26,7 @@ from ...models.motion import AttitudeLayout, AttitudeParams, attitude_function
 from ...models.rotations import euler_matrix
 from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import AttitudeFit, periodogram_peak
+from ..calibration import channel_slices
 
 MIN_FREE_DECAY_1_S = 0.01
 GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference")
@@ -362,11 +363,7 @@ class GapModel:
         return out
 
     def channel_slices(self) -> dict:
-        out, k = {}, 0
-        for ch, n in self.channels:
-            out[ch] = slice(k, k + n)
-            k += n
-        return out
+        return channel_slices(self.channels)
 
 
 def _append_mode(p, layout: AttitudeLayout, omega, decay, roll_cs, pitch_cs):
