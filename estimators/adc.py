@@ -15,7 +15,7 @@ four-beam ADCPs do (the paper's Eq. 94 uses beams 2, 3, 4 only; erratum 4), vect
 over pings; a ping with one beam lost falls back to the exact three-beam solution and
 says so in ``beams_used``. ``paper_literal`` is Eqs. 79-81 and 94 as printed: beams 2,
 3, 4 and the frame-mixing Omega r. ``rootfinder`` solves the unmultiplied four-beam equations
-exactly per ping (:mod:`adcpdyn.solvers.rootfinder`). ``oracle`` is that exact solve
+exactly per ping by inverting the measurement model the calibration fits (:mod:`adcpdyn.solvers.rootfinder`). ``oracle`` is that exact solve
 with the true attitude, lever arms and installation angles of a simulated case: the
 floor the others are judged against. Water cells are corrected the same way from Eq. 88 multiplied out (Eq. 95,
 four beams by least squares; the paper's Eq. 98 uses three) with the corrected vessel
@@ -62,17 +62,18 @@ def _transducer_depths(case: Case, Lam_T: np.ndarray, r: np.ndarray) -> np.ndarr
     return g_depth + np.einsum("nj,kj->nk", Lam_T[:, 0, 2, :], r)
 
 
-def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str, timing: str = "deep"):
-    """A (N, 4, 3) and b (N, 4) of Eq. 89 for every ping and beam, and the beam geometry."""
-    t = case.pings.time_s
+def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str, timing: str = "deep",
+              rows=slice(None)):
+    """A (N, 4, 3) and b (N, 4) of Eq. 89 for every ping (or the pings ``rows``) and beam, and the beam geometry."""
+    t = case.pings.time_s[rows]
     c = case.instrument.sound_speed_m_s
     B = case.instrument.beam_directions()
     Lst = np.asarray(euler_matrix(*ypr_st))
     r = np.asarray(lever_arms_s, dtype=float)
     d_T, w_T, Lam_T = _beam_state(attitude, t[:, None], Lst, B, r, tangential)
     u_T = np.sum(w_T * d_T, axis=-1)  # (N, 4)
-    depth = case.environment.depth_at_pings(t.size)[:, None]
-    v_meas = case.pings.bt_radial_m_s
+    depth = case.environment.depth_at_pings(case.pings.n)[rows][:, None]
+    v_meas = case.pings.bt_radial_m_s[rows]
     l = (depth - _transducer_depths(case, Lam_T, r)) / d_T[..., 2] * (1 - np.nan_to_num(v_meas) / c)  # Eq. 67
     t_R = t[:, None] + (2 * l / c if timing == "deep" else np.zeros_like(l))  # Eq. 68; "shallow": no flight
     d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential)
@@ -136,24 +137,31 @@ def _solve(A, b, beam_dirs_t, beams_allowed):
     return V, err, n_good
 
 
-def _rootfind(case: Case, geo: dict, V, err, n_good):
-    """Exact four-beam solve of every complete ping, started from the closed form."""
-    from ..solvers.rootfinder import NEWTON_RESIDUAL_TOL, doppler_newton, doppler_rootfinder, error_direction, pack
+def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing: str, options=None):
+    """Exact four-beam solve of every complete ping; the closed form's three-beam solution elsewhere."""
+    from ..solvers.rootfinder import NEWTON_RESIDUAL_TOL, error_direction, solve_bottom_track
 
+    bt = case.pings.bt_radial_m_s
+    n_good = np.isfinite(bt).sum(axis=1)
+    N = n_good.size
+    V, err = np.full((N, 3), np.nan), np.full(N, np.nan)
+    info = {"rootfinder_fallback_pings": 0, "rootfinder_unconverged_pings": 0}
+    B = case.instrument.beam_directions()
     full = np.flatnonzero(n_good == 4)
-    if full.size == 0:
-        return V, err
-    _, e_row = beam_to_instrument(case.instrument.beam_directions())
-    n_dir, c = error_direction(e_row), case.instrument.sound_speed_m_s
-    p = pack(geo["d_T"][full], geo["d_R"][full], geo["u_T"][full], geo["u_R"][full], case.pings.bt_radial_m_s[full])
-    x0 = np.vstack([V[full].T, err[full][None, :]])
-    x, res = (np.asarray(a) for a in doppler_newton(n_dir, c, full.size)(x0, p))
-    slow = np.flatnonzero(~(res.ravel() <= NEWTON_RESIDUAL_TOL))  # not converged in the fixed steps (or NaN)
-    if slow.size:
-        x[:, slow] = np.asarray(doppler_rootfinder(n_dir, c, slow.size)(x0[:, slow], p[:, slow]))
-    V, err = V.copy(), err.copy()
-    V[full], err[full] = x[:3].T, x[3]
-    return V, err
+    if full.size:
+        _, e_row = beam_to_instrument(B)
+        r = np.asarray(lever_arms_s, dtype=float)
+        g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
+        depth = case.environment.depth_at_pings(N)[full]
+        V[full], err[full], res, info["rootfinder_fallback_pings"] = solve_bottom_track(
+            attitude.layout, attitude.pack(), r, ypr_st, g_depth, case.pings.time_s[full], depth, bt[full],
+            case.instrument.sound_speed_m_s, B, error_direction(e_row), timing, options)
+        info["rootfinder_unconverged_pings"] = int(np.sum(~(res <= NEWTON_RESIDUAL_TOL)))
+    three = np.flatnonzero(n_good == 3)
+    if three.size:
+        geo = _geometry(case, attitude, lever_arms_s, ypr_st, "consistent", timing, rows=three)
+        V[three], err[three], _ = _solve(geo["A"], geo["b"], B, [True] * 4)
+    return V, err, n_good, info
 
 
 def lever_arms_from_calibration(calibration: dict, case: Case) -> tuple[np.ndarray, np.ndarray]:
@@ -187,14 +195,15 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
 
 
 def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None = None,
-                       attitude: AttitudeParams | None = None, timing: str = "deep") -> Correction:
+                       attitude: AttitudeParams | None = None, timing: str = "deep",
+                       rootfinder_options=None) -> Correction:
     """Correct every ping of a case (see module docstring).
 
     Parameters
     ----------
     case : Case
     method : str
-        ``adc``, ``paper_literal`` or ``oracle``.
+        ``adc``, ``paper_literal``, ``rootfinder`` or ``oracle``.
     calibration : dict
         Contents of CALIB.json (lever arms, installation angles); not used by ``oracle``.
     attitude : AttitudeParams, optional
@@ -202,6 +211,8 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     timing : str
         ``deep`` (transmit and receive at their own times, Eqs. 66-70) or ``shallow``
         (the paper's shallow-water approximation: the round trip taken as instantaneous).
+    rootfinder_options : RootfinderOptions, optional
+        Newton steps, threads and compilation of the exact solve (``rootfinder``, ``oracle``).
     """
     if timing not in ("deep", "shallow"):
         raise ValueError(f"timing: expected 'deep' or 'shallow', got {timing!r}")
@@ -219,14 +230,16 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"
-    geo = _geometry(case, attitude, lever, ypr_st, tangential, timing)
-    allowed = [False, True, True, True] if method == "paper_literal" else [True] * 4
-    V, err, n_good = _solve(geo["A"], geo["b"], case.instrument.beam_directions(), allowed)
     if method in ("rootfinder", "oracle"):
-        V, err = _rootfind(case, geo, V, err, n_good)
+        V, err, n_good, info = _rootfind(case, attitude, lever, ypr_st, timing, rootfinder_options)
+    else:
+        geo = _geometry(case, attitude, lever, ypr_st, tangential, timing)
+        allowed = [False, True, True, True] if method == "paper_literal" else [True] * 4
+        V, err, n_good = _solve(geo["A"], geo["b"], case.instrument.beam_directions(), allowed)
+        info = {}
     water = None
     if case.water is not None:
         water = _water(case, attitude, lever, ypr_st, V, tangential, timing)
     return Correction(method=method, time_s=case.pings.time_s.copy(), vessel_velocity_m_s=V, error_velocity_m_s=err,
                       beams_used=n_good, water_velocity_m_s=water, attrs={"lever_arms_sensor_m": np.asarray(lever).tolist(),
-                                                "installation_ypr_rad": np.asarray(ypr_st).tolist(), "timing": timing})
+                                                "installation_ypr_rad": np.asarray(ypr_st).tolist(), "timing": timing, **info})

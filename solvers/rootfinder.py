@@ -1,74 +1,186 @@
-"""Exact per-ping solve of the two-way Doppler equations (Eq. 70) for all four beams.
+"""Exact per-ping inversion of the bottom-track measurement model for all four beams.
 
-Square system per ping: unknowns the vessel velocity V (3) and the error velocity e;
-for each beam i
+Per ping the unknowns are the vessel velocity V (3) and the error velocity e, and the four
+equations are the measurement model the calibration fits
+(:func:`adcpdyn.models.measurement.bottom_track_function`, Eqs. 65-70):
 
-    radial_from_ratio((c + (V + w_Ri) . d_Ri) / (c - (V + w_Ti) . d_Ti), c) + e n_i = v_i
+    radial_i(V; t_T, depth, attitude model, r, Lambda_st) + e n_i = v_i,   i = 1..4
 
-with w the tangential velocities, d the beam directions at transmit and receive, and
-n the error-velocity direction (the Janus null vector scaled so that e equals the
-instrument's error velocity). Posed symbolically once, solved by ``casadi.rootfinder``
-(Newton) for every ping at once through ``map``. Where the closed form's
-multiplied-out equations hold exactly this agrees with it; it also keeps the
-instrument's nonlinear velocity conversion instead of linearising around it.
+with n the error-velocity direction (the Janus null vector scaled so that e equals the
+instrument's error velocity). Beam directions and tangential velocities at transmit and
+at receive, the receive time from the geometry with the transducer moving during the
+flight, and the instrument's nonlinear velocity conversion all come from that one model,
+so nothing is linearised or taken from the measured radial.
+
+The solve is one SX expression per ping: a Newton step from V = 0, e = 0, then ``steps``
+chord steps (Newton with that first Jacobian kept: it differs from the Jacobian at the
+solution by O(u/c) ~ 1e-3, so each step gains about three digits at a third of the
+cost of a Newton step), and the final residual; mapped over pings
+on threads and compiled to machine code when the run is long enough to repay the
+compiler (CasADi ``jit``). Pings whose residual stays above tolerance are handed to
+``casadi.rootfinder`` (Newton with a convergence test) on the same residual.
 """
 
 from __future__ import annotations
 
+import functools
+import shutil
+import tempfile
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
-from ..models.doppler import bottom_echo_ratio, radial_from_ratio
+from ..models.measurement import bottom_track_function
+from ..models.motion import AttitudeLayout, attitude_function
 
-
-NEWTON_STEPS = 3  # from the closed form the error falls ~1e-3 -> 1e-9 -> 1e-21 m/s
 NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it go to casadi.rootfinder
-THREADS = 2
+CHUNK = 16384  # pings per mapped call (the map is built once per chunk size)
+N_PING_INPUTS = 6  # t_T, bottom depth, four measured radial velocities
 
 
-def doppler_residual(error_direction: np.ndarray, sound_speed: float) -> ca.Function:
-    """``g(x (4), p (36)) -> residual (4)`` of one ping (m/s): the unknown first."""
+@dataclass(frozen=True)
+class RootfinderOptions:
+    """Settings of the exact per-ping solve.
+
+    Parameters
+    ----------
+    steps : int
+        Chord steps after the first Newton step; the error falls about three digits per
+        step from ~1e-3 m/s.
+    threads : int
+        Threads evaluating the mapped solve.
+    compile : str
+        ``auto`` (compile with the system C compiler when there are at least
+        ``compile_min_pings`` pings and a compiler is found), ``always`` or ``never``.
+    compile_min_pings : int
+        Below this the interpreted solve finishes before the compiler would (~5 s).
+    """
+
+    steps: int = 2
+    threads: int = 2
+    compile: str = "auto"
+    compile_min_pings: int = 100_000
+
+    def __post_init__(self):
+        if self.compile not in ("auto", "always", "never"):
+            raise ValueError(f"RootfinderOptions.compile: expected 'auto', 'always' or 'never', got {self.compile!r}")
+        if self.steps < 0:
+            raise ValueError(f"RootfinderOptions.steps: expected >= 0, got {self.steps}")
+
+    def compiled(self, n_pings: int) -> bool:
+        if self.compile == "never" or shutil.which("gcc") is None:
+            return False
+        return self.compile == "always" or n_pings >= self.compile_min_pings
+
+
+@dataclass(frozen=True)
+class _Model:
+    """What fixes the per-ping equations besides the shared parameter vector (hashable)."""
+
+    layout: AttitudeLayout
+    timing: str
+    sound_speed_m_s: float
+    beam_dirs_t: tuple
+    error_direction: tuple
+
+    def shared_size(self) -> int:
+        return self.layout.size + 12 + 3 + 1  # attitude parameters, r (4x3), Lambda_st angles, depth of G
+
+
+def shared_parameters(attitude_p: np.ndarray, lever_arms_m: np.ndarray, ypr_st_rad, g_depth_m: float) -> np.ndarray:
+    """The parameter column shared by every ping: [attitude p, r row by row, ypr_st, depth of G]."""
+    return np.concatenate([attitude_p, np.asarray(lever_arms_m, dtype=float).ravel(),
+                           np.asarray(ypr_st_rad, dtype=float), [g_depth_m]])
+
+
+@functools.lru_cache(maxsize=16)
+def _residual(model: _Model) -> ca.Function:
+    """``g(x (4), q (6), s) -> residual (4)`` in m/s: the measurement model minus the measured radials."""
+    bt = bottom_track_function(attitude_function(model.layout), model.timing)
     x = ca.SX.sym("x", 4)
-    p = ca.SX.sym("p", 36)
-    d_T = ca.reshape(p[0:12], 3, 4).T
-    d_R = ca.reshape(p[12:24], 3, 4).T
-    w_T, w_R, v = p[24:28], p[28:32], p[32:36]
-    V, e = x[:3], x[3]
-    u_T = ca.mtimes(d_T, V) + w_T
-    u_R = ca.mtimes(d_R, V) + w_R
-    model = radial_from_ratio(bottom_echo_ratio(u_T, u_R, sound_speed), sound_speed)  # Eqs. 70, 65
-    return ca.Function("doppler_residual", [x, p], [model + e * ca.DM(error_direction) - v], ["x", "p"], ["g"])
+    q = ca.SX.sym("q", N_PING_INPUTS)
+    s = ca.SX.sym("s", model.shared_size())
+    n_att = model.layout.size
+    r = ca.reshape(s[n_att:n_att + 12], 3, 4).T  # row-major (4, 3)
+    radial, _ = bt(q[0], q[1], s[-1], model.sound_speed_m_s, x[:3], s[:n_att], r, s[n_att + 12:n_att + 15],
+                   ca.DM(np.reshape(model.beam_dirs_t, (4, 3))))
+    g = radial + x[3] * ca.DM(model.error_direction) - q[2:6]
+    return ca.Function("bottom_track_residual", [x, q, s], [g], ["x", "q", "s"], ["g"])
 
 
-def doppler_rootfinder(error_direction: np.ndarray, sound_speed: float, n_pings: int,
-                       parallelization: str = "serial") -> ca.Function:
-    """``rf(x0 (4, N), p (36, N)) -> x (4, N)``; p per ping = [d_T (12), d_R (12), w_T . d_T (4),
-    w_R . d_R (4), measured radial (4)] (see :func:`pack`). Newton with a convergence test."""
-    g = doppler_residual(error_direction, sound_speed)
-    rf = ca.rootfinder("doppler_rootfinder", "newton", g, {"abstol": 1e-12, "max_iter": 20})
-    return rf.map(n_pings, parallelization)
-
-
-def doppler_newton(error_direction: np.ndarray, sound_speed: float, n_pings: int, steps: int = NEWTON_STEPS,
-                   threads: int = THREADS) -> ca.Function:
-    """``newton(x0 (4, N), p (36, N)) -> (x (4, N), |residual|_inf (1, N))``: a fixed number of
-    Newton steps as one expanded SX expression, mapped over pings on ``threads`` threads.
-    Callers check the residual and send pings that did not converge to :func:`doppler_rootfinder`."""
-    g = doppler_residual(error_direction, sound_speed)
+@functools.lru_cache(maxsize=16)
+def _newton(model: _Model, steps: int, compiled: bool) -> ca.Function:
+    """``solve(q (6), s) -> (x (4), |residual|_inf)``: the chord iteration unrolled into one SX expression."""
+    g = _residual(model)
     x = ca.SX.sym("x", 4)
-    p = ca.SX.sym("p", 36)
-    jac = ca.Function("doppler_jacobian", [x, p], [ca.jacobian(g(x, p), x)])
-    xk = x
+    q = ca.SX.sym("q", N_PING_INPUTS)
+    s = ca.SX.sym("s", model.shared_size())
+    gj = ca.Function("residual_and_jacobian", [x, q, s], [g(x, q, s), ca.jacobian(g(x, q, s), x)])
+    g0, j0 = gj(ca.SX.zeros(4), q, s)
+    j0_inv = ca.inv(j0)
+    xk = -ca.mtimes(j0_inv, g0)
     for _ in range(steps):
-        xk = xk - ca.solve(jac(xk, p), g(xk, p))
-    step = ca.Function("doppler_newton", [x, p], [xk, ca.norm_inf(g(xk, p))], ["x0", "p"], ["x", "residual"])
-    return step.map(n_pings, "thread", threads) if threads > 1 else step.map(n_pings)
+        xk = xk - ca.mtimes(j0_inv, g(xk, q, s))
+    outputs = ca.cse([xk, ca.norm_inf(g(xk, q, s))])
+    opts = {}
+    if compiled:
+        opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
+                "jit_options": {"flags": ["-O2"], "verbose": False, "directory": tempfile.gettempdir() + "/"}}
+    return ca.Function("bottom_track_newton", [q, s], outputs, ["q", "s"], ["x", "residual"], opts)
 
 
-def pack(d_T, d_R, w_T, w_R, radial) -> np.ndarray:
-    """Per-ping parameter columns (36, N) for :func:`doppler_rootfinder`."""
-    N = radial.shape[0]
-    return np.vstack([d_T.reshape(N, 12).T, d_R.reshape(N, 12).T, w_T.T, w_R.T, radial.T])
+@functools.lru_cache(maxsize=16)
+def _mapped(model: _Model, steps: int, compiled: bool, n: int, threads: int) -> ca.Function:
+    f = _newton(model, steps, compiled)
+    return f.map(n, "thread", threads) if threads > 1 else f.map(n)
+
+
+@functools.lru_cache(maxsize=16)
+def _fallback(model: _Model, n: int) -> ca.Function:
+    """casadi.rootfinder (Newton with a convergence test) on the same residual, mapped."""
+    rf = ca.rootfinder("bottom_track_rootfinder", "newton", _residual(model), {"abstol": 1e-12, "max_iter": 30})
+    return rf.map(n)
+
+
+def solve_bottom_track(layout: AttitudeLayout, attitude_p, lever_arms_m, ypr_st_rad, g_depth_m: float,
+                       time_s, depth_m, radial_m_s, sound_speed_m_s: float, beam_dirs_t, error_direction,
+                       timing: str = "deep", options: RootfinderOptions | None = None):
+    """Vessel velocity (N, 3), error velocity (N,), final residual (N,) and how many pings went to
+    ``casadi.rootfinder``, for pings with four beams.
+
+    ``attitude_p`` packs the attitude model of the sensor frame, ``lever_arms_m`` (4, 3)
+    are in that frame and ``ypr_st_rad`` turns the transducer frame into it; ``g_depth_m``
+    is the depth of the centre of rotation. Pings whose residual stays above
+    ``NEWTON_RESIDUAL_TOL`` after ``casadi.rootfinder`` get NaN (their residual says why).
+    """
+    options = options or RootfinderOptions()
+    model = _Model(layout, timing, float(sound_speed_m_s), tuple(np.asarray(beam_dirs_t, dtype=float).ravel()),
+                   tuple(np.asarray(error_direction, dtype=float).ravel()))
+    q = np.vstack([np.asarray(time_s, dtype=float), np.asarray(depth_m, dtype=float),
+                   np.asarray(radial_m_s, dtype=float).T])
+    s = shared_parameters(np.asarray(attitude_p, dtype=float), lever_arms_m, ypr_st_rad, g_depth_m)
+    n = q.shape[1]
+    size = min(n, CHUNK)
+    solve = _mapped(model, options.steps, options.compiled(n), size, options.threads)
+    x = np.empty((4, n))
+    res = np.empty(n)
+    for start in range(0, n, size):
+        block = q[:, start:start + size]
+        m = block.shape[1]
+        padded = np.pad(block, ((0, 0), (0, size - m)), mode="edge")
+        xb, rb = solve(padded, s)
+        x[:, start:start + m] = np.asarray(xb)[:, :m]
+        res[start:start + m] = np.asarray(rb).ravel()[:m]
+    slow = np.flatnonzero(~(res <= NEWTON_RESIDUAL_TOL))  # not converged in the fixed steps (or NaN)
+    if slow.size:
+        x0 = np.nan_to_num(x[:, slow])
+        x[:, slow] = np.asarray(_fallback(model, slow.size)(x0, q[:, slow], s))
+        g = _residual(model).map(slow.size)(x[:, slow], q[:, slow], s)
+        res[slow] = np.max(np.abs(np.asarray(g)), axis=0)
+        bad = slow[~(res[slow] <= NEWTON_RESIDUAL_TOL)]
+        x[:, bad] = np.nan
+    return x[:3].T, x[3], res, int(slow.size)
 
 
 def error_direction(e_row: np.ndarray) -> np.ndarray:

@@ -111,3 +111,31 @@ def test_water_profile_no_rotation_limit():
     ok = np.isfinite(out.water_velocity_m_s[..., 0])
     assert ok.mean() > 0.5
     assert np.max(np.abs(out.water_velocity_m_s[ok] - case.truth.water_velocity_m_s[ok])) < 1e-6
+
+
+def test_pings_the_chord_steps_leave_unconverged_go_to_casadi_rootfinder():
+    """With no chord step after the first Newton step, deep-water pings stay ~1e-6 m/s off
+    and casadi.rootfinder must finish them: same answer as the default iteration."""
+    from adcpdyn.solvers.rootfinder import RootfinderOptions
+
+    case = simulate(noise_free(get_scenario("deep_ocean")), seed=2)
+    calib = truth_calibration(case)
+    default = dynamic_correction(case, "rootfinder", calib)
+    bare = dynamic_correction(case, "rootfinder", calib, rootfinder_options=RootfinderOptions(steps=0))
+    assert default.attrs["rootfinder_fallback_pings"] == 0
+    assert bare.attrs["rootfinder_fallback_pings"] > 0
+    assert bare.attrs["rootfinder_unconverged_pings"] == default.attrs["rootfinder_unconverged_pings"] == 0
+    assert np.nanmax(np.abs(bare.vessel_velocity_m_s - default.vessel_velocity_m_s)) < 1e-9
+
+
+@pytest.mark.skipif(__import__("shutil").which("gcc") is None, reason="no C compiler")
+def test_compiled_rootfinder_equals_interpreted(tmp_path, monkeypatch):
+    from adcpdyn.solvers.rootfinder import RootfinderOptions
+
+    monkeypatch.chdir(tmp_path)
+    case = simulate(get_scenario("pool_m1"), seed=3)
+    calib = truth_calibration(case)
+    vm = dynamic_correction(case, "rootfinder", calib, rootfinder_options=RootfinderOptions(compile="never"))
+    cc = dynamic_correction(case, "rootfinder", calib, rootfinder_options=RootfinderOptions(compile="always"))
+    assert np.nanmax(np.abs(vm.vessel_velocity_m_s - cc.vessel_velocity_m_s)) < 1e-12
+    assert list(tmp_path.iterdir()) == []  # the compiler's files stay out of the working folder
