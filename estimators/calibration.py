@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass, field
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 from scipy.stats import qmc
 
 from ..cases.case import Case
@@ -34,12 +35,15 @@ from ..models.rotations import course_difference_rad, euler_matrix
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from .attitude_fit import AttitudeFit, fit_attitude
 from .formulations import AXES, FORMULATIONS, lever_block
+from .row_jacobian import RowBlock, RowJacobian
 from .uncertainty import Uncertainty, uncertainty
 
 TIMINGS = ("auto", "shallow", "deep")
 METHODS = ("joint", "two-stage")
 TANGENTIALS = ("consistent", "paper_literal")
 DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
+JACOBIANS = ("auto", "symbolic", "assembled")
+ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is assembled per row
 ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
 
 
@@ -101,6 +105,7 @@ class CalibrationConfig:
     epsilon_rel: float = 0.05
     use_ranges: bool = True
     workers: int = 2
+    jacobian: str = "auto"
     solver: SolverOptions = field(default_factory=SolverOptions)
 
     def __post_init__(self):
@@ -112,6 +117,8 @@ class CalibrationConfig:
             raise ValueError(f"CalibrationConfig.method: expected one of {list(METHODS)}, got {self.method!r}")
         if self.tangential not in TANGENTIALS:
             raise ValueError(f"CalibrationConfig.tangential: expected one of {list(TANGENTIALS)}, got {self.tangential!r}")
+        if self.jacobian not in JACOBIANS:
+            raise ValueError(f"CalibrationConfig.jacobian: expected one of {list(JACOBIANS)}, got {self.jacobian!r}")
         if int(self.n_starts) < 1:
             raise ValueError(f"CalibrationConfig.n_starts: expected >= 1, got {self.n_starts}")
 
@@ -396,6 +403,10 @@ class CalibrationProblem:
                 self.channels.append((f"reference_{AXES[j]}", L))
         raw = ca.vertcat(*models)
         self.masks = self._masks()
+        n_nodes = (bottom_track_function(att_fun, self.timing, config.tangential).n_instructions() * N
+                   + att_fun.n_instructions() * ((0 if self.two_stage else M) + (ref.time_s.size if self.use_reference else 0)))
+        self.assembled = config.jacobian == "assembled" or (config.jacobian == "auto" and n_nodes > ASSEMBLED_MIN_NODES)
+        self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
         weights = ca.MX.sym("w", raw.shape[0])
         e = weights * raw
         self.sigma = self._initial_sigmas()
@@ -406,19 +417,75 @@ class CalibrationProblem:
         r_z = ca.substitute([self.lever.r], *subs)[0]
         st_z = ca.substitute([ypr_st], *subs)[0]
         mx_nlp = {"x": z, "p": weights, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
-        if config.solver.expand:
+        if self.assembled:
+            shared = ca.vertcat(p_att, ca.vec(self.lever.r.T), ypr_beams, g_depth,
+                                heading_offset if heading_offset is not None else ca.MX(0, 1))
+            self.jacobian_fun = self._row_jacobian(z, ca.substitute([shared], *subs)[0], raw.shape[0])
+        if self.solver_options.expand:
             self.nlp, e_z, ex = expand_problem(mx_nlp, e_z, {"raw": raw_z, "r": ca.vec(r_z.T), "st": st_z})
             z, weights, g_z = self.nlp["x"], self.nlp["p"], self.nlp["g"]
             raw_z, r_vec, st_z = ex["raw"], ex["r"], ex["st"]
         else:
             self.nlp, r_vec = mx_nlp, ca.vec(r_z.T)
-        self.jacobian_fun = ca.Function("residual_jacobian", [z, weights], [ca.jacobian(e_z, z)])
+        if not self.assembled:
+            self.jacobian_fun = ca.Function("residual_jacobian", [z, weights], [ca.jacobian(e_z, z)])
         self.residual_fun = ca.Function("residuals", [z, weights], [e_z, raw_z])
         self.derived_fun = ca.Function("derived", [z], [r_vec, st_z, ca.jacobian(r_vec, z),
                                                       ca.jacobian(st_z, z), g_z, ca.jacobian(g_z, z)])
         self.residuals = e_z
         self.lbg, self.ubg = self.lever.lbg, self.lever.ubg
-        self.solver = build_solver(self.nlp, config.solver, "calibration", residuals=self.jacobian_fun)
+        self.solver = build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun)
+
+    def _row_jacobian(self, z, shared_z, n_rows: int) -> RowJacobian:
+        """The residual Jacobian assembled from per-row Jacobians (see :mod:`.row_jacobian`).
+
+        Shared vector s = [attitude parameters, lever arms row by row, beam angles, depth of G,
+        heading misalignment]; its layout here must match the one built in ``__init__``.
+        """
+        case, att_fun, n_att = self.case, self.attitude_fun, self.layout.size
+        n_s = shared_z.shape[0]
+        d1, d2, v, s = ca.SX.sym("d", 1), ca.SX.sym("d", 2), ca.SX.sym("v", 3), ca.SX.sym("s", n_s)
+        p_att, r = s[:n_att], ca.reshape(s[n_att:n_att + 12], 3, 4).T
+        ypr_beams, g_depth = s[n_att + 12:n_att + 15], s[n_att + 15]
+        knots_basis = lambda t: None if self.knots is None else sp.csr_matrix(_hat_basis(t, self.knots))
+        blocks, offset = [], 0
+        if not self.two_stage:
+            a = case.attitude
+            ypr = att_fun(d1, p_att)[0]
+            blocks.append(RowBlock(ca.Function("attitude_rows", [d1, v, s], [ypr]), a.time_s[None, :], offset,
+                                   sign=np.array([-1.0, 1.0, 1.0])))  # heading residual is measured - model
+            offset += 3 * a.time_s.size
+        pings = case.pings
+        bt = bottom_track_function(att_fun, self.timing, self.config.tangential)
+        radial, rng = bt(d2[0], d2[1], g_depth, case.instrument.sound_speed_m_s, v, p_att, r, ypr_beams,
+                         ca.DM(self.beam_dirs_t))
+        out = ca.vertcat(radial, rng) if self.use_ranges else radial
+        data = np.vstack([pings.time_s, case.environment.depth_at_pings(pings.n)])
+        blocks.append(RowBlock(ca.Function("bottom_track_rows", [d2, v, s], [out]), data, offset,
+                               velocity_basis=knots_basis(pings.time_s)))
+        offset += out.shape[0] * pings.n
+        if self.use_reference:
+            ref = case.reference
+            dLam = att_fun(d1, p_att)[2]
+            p_ref = np.asarray(ref.point_body_m, dtype=float)
+            if self.head_sensor:
+                p_ref = np.asarray(euler_matrix(*self.config.nominal_installation_ypr_rad)).T @ p_ref
+            vs = v + ca.mtimes(dLam, ca.DM(p_ref))
+            if self.head_yaw:
+                d = s[n_s - 1]
+                vs = ca.vertcat(ca.cos(d) * vs[0] - ca.sin(d) * vs[1], ca.sin(d) * vs[0] + ca.cos(d) * vs[1], vs[2])
+            blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), ref.time_s[None, :], offset,
+                                   velocity_basis=knots_basis(ref.time_s)))
+            offset += 3 * ref.time_s.size
+        if offset != n_rows:
+            raise RuntimeError(f"assembled Jacobian: {offset} rows, residuals have {n_rows}")
+        knot_cols = None
+        if self.knots is not None:
+            k = len(self.knots)
+            knot_cols = (len(self.names) - 3 * k + np.arange(3 * k)).reshape(k, 3)
+        jac = RowJacobian(z, shared_z, blocks, n_rows, knot_cols, self.scale)
+        jac.n_p = n_rows
+        return jac
 
     # ------------------------------------------------------------------ helpers
     def _attitude_bounds(self, params: AttitudeParams):
@@ -585,7 +652,8 @@ class CalibrationProblem:
         cfg = self.config
         x0s = self.start_points(cfg.n_starts, cfg.seed)
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
-        make = lambda: build_solver(self.nlp, cfg.solver, "calibration", residuals=self.jacobian_fun, like=self.solver)
+        make = lambda: build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
+                                    like=self.solver)
         ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
                         make_solver=make, warm_start=cfg.solver.warm_start)
         if cfg.estimate_noise:
@@ -614,7 +682,8 @@ class CalibrationProblem:
     def _result(self, ms: MultistartResult) -> CalibrationResult:
         w = self.weights()
         e = np.asarray(self.residual_fun(ms.x, w)[0]).ravel()
-        J = np.asarray(self.jacobian_fun(ms.x, w))
+        J = self.jacobian_fun(ms.x, w)
+        J = J.toarray() if self.assembled else np.asarray(J)
         r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))

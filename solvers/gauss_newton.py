@@ -16,14 +16,21 @@ import scipy.sparse as sp
 class GaussNewtonHessian(ca.Callback):
     """``nlp_hess_l(x, p, lam_f, lam_g) -> sigma * triu(J^T J)`` from a Jacobian Function."""
 
-    def __init__(self, jacobian: ca.Function, n_g: int, name: str = "nlp_hess_l"):
+    def __init__(self, jacobian, n_g: int, name: str = "nlp_hess_l"):
+        """``jacobian``: a CasADi Function (x, p) -> J, or a callable (x, p) -> scipy sparse J
+        with attributes ``sparsity`` (its structural pattern, scipy) and ``n_z``, ``n_p``."""
         ca.Callback.__init__(self)
         self._jac = jacobian
-        self._n_x = jacobian.size1_in(0)
-        self._n_p = jacobian.size1_in(1)
         self._n_g = n_g
-        ones = ca.DM(jacobian.sparsity_out(0), 1.0)
-        self._hess_sp = ca.triu(ca.mtimes(ones.T, ones)).sparsity()
+        if isinstance(jacobian, ca.Function):
+            self._n_x, self._n_p = jacobian.size1_in(0), jacobian.size1_in(1)
+            ones = ca.DM(jacobian.sparsity_out(0), 1.0)
+            self._hess_sp = ca.triu(ca.mtimes(ones.T, ones)).sparsity()
+        else:
+            self._n_x, self._n_p = jacobian.n_z, jacobian.n_p
+            P = jacobian.sparsity.astype(float)
+            H = sp.triu(P.T @ P).tocoo()
+            self._hess_sp = ca.Sparsity.triplet(self._n_x, self._n_x, H.row.tolist(), H.col.tolist())
         rows, cols = self._hess_sp.get_triplet()
         self._rows, self._cols = np.asarray(rows), np.asarray(cols)
         self.construct(name, {})
@@ -48,7 +55,13 @@ class GaussNewtonHessian(ca.Callback):
         return self._hess_sp
 
     def eval(self, arg):
-        J = self._jac(arg[0], arg[1]).sparse()
-        H = sp.triu(J.T @ J, format="csr")
-        values = np.asarray(H[self._rows, self._cols]).ravel() * float(arg[2])
-        return [ca.DM(self._hess_sp, values)]
+        if isinstance(self._jac, ca.Function):
+            J = self._jac(arg[0], arg[1]).sparse()
+        else:
+            J = self._jac(arg[0].full().ravel(), arg[1].full().ravel())
+        if J.nnz > 0.05 * J.shape[0] * J.shape[1]:  # dense enough for BLAS to beat the sparse product
+            Jd = J.toarray()
+            values = (Jd.T @ Jd)[self._rows, self._cols]
+        else:
+            values = np.asarray(sp.csr_matrix(J.T @ J)[self._rows, self._cols]).ravel()
+        return [ca.DM(self._hess_sp, values * float(arg[2]))]

@@ -153,7 +153,8 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
     """The IPOPT solver Function for an NLP dict.
 
     For ``hessian="gauss-newton"`` pass ``residuals``: the vector e with f = 0.5 |e|^2,
-    or directly the Function (x, p) -> de/dx. The Lagrangian Hessian is then
+    the Function (x, p) -> de/dx, or an assembled Jacobian such as
+    :class:`~adcpdyn.estimators.row_jacobian.RowJacobian`. The Lagrangian Hessian is then
     sigma J^T J (constraint curvature left out, as in CasADi's ``sysid.py`` example),
     formed numerically by :class:`~adcpdyn.solvers.gauss_newton.GaussNewtonHessian`.
 
@@ -164,14 +165,16 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
     """
     opts = options.ipopt()
     hessian = options.hessian
+    assembled = residuals is not None and hasattr(residuals, "sparsity") and not isinstance(residuals, ca.Function)
     if hessian == "auto":
         size = residuals.size1_out(0) * residuals.size2_out(0) if isinstance(residuals, ca.Function) else 0
-        hessian = "gauss-newton" if residuals is not None and size > AUTO_GN_SIZE else "exact"
+        hessian = "gauss-newton" if assembled or (residuals is not None and size > AUTO_GN_SIZE) else "exact"
     if hessian == "gauss-newton":
         if residuals is None:
             raise ValueError("residuals: required for hessian='gauss-newton' (f must be 0.5 |residuals|^2)")
         x, p = nlp["x"], nlp.get("p", ca.MX.sym("p", 0))
-        jac = residuals if isinstance(residuals, ca.Function) else ca.Function("residual_jacobian", [x, p], [ca.jacobian(residuals, x)])
+        jac = residuals if isinstance(residuals, ca.Function) or assembled else \
+            ca.Function("residual_jacobian", [x, p], [ca.jacobian(residuals, x)])
         hess = GaussNewtonHessian(jac, nlp["g"].shape[0])
         opts["hess_lag"] = hess
         _KEEP_ALIVE.append(hess)  # the callback must outlive the solver
