@@ -191,7 +191,8 @@ def _calibration_config(args, formulation=None):
     from .estimators.calibration import CalibrationConfig
 
     return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
-                             method=args.method, timing=args.timing, tangential=args.tangential)
+                             method=args.method, timing=args.timing, tangential=args.tangential,
+                             jacobian=getattr(args, "jacobian", "auto"))
 
 
 def cmd_calibrate(args) -> int:
@@ -219,7 +220,8 @@ def cmd_calibrate(args) -> int:
         result = CalibrationProblem(case, _calibration_config(args)).solve()
     result.to_json(args.out)
     ms = result.multistart
-    print(f"{case.name}: {args.method} calibration, formulation {result.formulation}, {result.timing}-water model")
+    print(f"{case.name}: {args.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
+          f"{result.jacobian} Jacobian")
     print(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
           f"{result.max_constraint_violation:.2e}; {ms.time_s:.2f} s")
     label = "head-frame lever arms (m)" if result.attitude_frame == "transducer" else "radius vectors, body frame (m)"
@@ -436,6 +438,8 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--method", default="joint", help="joint | two-stage")
         s.add_argument("--timing", default="auto", help="auto | shallow | deep bottom-track model")
         s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
+        s.add_argument("--jacobian", default="auto",
+                       help="auto | symbolic (whole problem differentiated by CasADi) | assembled (per-row, long runs)")
 
     s = sub.add_parser("calibrate", help="estimate attitude model, lever arms and installation angles (one or many cases)")
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")

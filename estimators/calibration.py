@@ -155,6 +155,7 @@ class CalibrationResult:
     heading_misalignment_rad: float = float("nan")
     heading_misalignment_se_rad: float = float("inf")
     warnings: list = field(default_factory=list)
+    jacobian: str = "symbolic"  # how the residual Jacobian was formed: symbolic or assembled per row
 
     @property
     def success(self) -> bool:
@@ -190,6 +191,7 @@ class CalibrationResult:
                 "iterations": ms.iterations,
                 "time_s": ms.time_s,
                 "n_groups": ms.n_groups,
+                "jacobian": self.jacobian,
                 "fraction_at_best": ms.fraction_at_best,
                 "best_start": ms.best_start,
                 "options": asdict(self.config.solver),
@@ -759,6 +761,7 @@ class CalibrationProblem:
             x_names=list(self.names), x=x, x_se=se_x, config=self.config,
             velocity_knots_s=self.knots, velocity_knots_m_s=vk, heading_misalignment_rad=misalignment,
             heading_misalignment_se_rad=misalignment_se, warnings=warn,
+            jacobian="assembled" if self.assembled else "symbolic",
         )
 
 def channel_slices(channels: list[tuple[str, int]]) -> dict:
