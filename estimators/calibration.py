@@ -86,6 +86,13 @@ class CalibrationConfig:
         installation angles at their nominal values).
     tangential : str
         ``consistent`` (dLambda/dt r) or ``paper_literal`` (Omega r as printed).
+    workers : int
+        Threads solving starts at once.
+    jacobian : str
+        Residual Jacobian (Gauss-Newton Hessian, standard errors): ``symbolic`` (the whole
+        problem expanded to SX and differentiated by CasADi), ``assembled`` (per-row
+        Jacobians chained numerically, :mod:`.row_jacobian`; MX problem) or ``auto``
+        (assembled above ``ASSEMBLED_MIN_NODES`` expanded nodes: long runs, deep water).
     solver : SolverOptions
     """
 
