@@ -436,7 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--starts", type=int, default=24, help="multistart size")
         s.add_argument("--seed", type=int, default=0, help="seed of the start design")
         s.add_argument("--method", default="joint", help="joint | two-stage")
-        s.add_argument("--timing", default="auto", help="auto | shallow | deep bottom-track model")
+        s.add_argument("--timing", default="auto", help="auto | shallow | deep | exact bottom-track model")
         s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
         s.add_argument("--jacobian", default="auto",
                        help="auto | symbolic (whole problem differentiated by CasADi) | assembled (per-row, long runs)")

@@ -75,7 +75,7 @@ def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangen
     depth = case.environment.depth_at_pings(case.pings.n)[rows][:, None]
     v_meas = case.pings.bt_radial_m_s[rows]
     l = (depth - _transducer_depths(case, Lam_T, r)) / d_T[..., 2] * (1 - np.nan_to_num(v_meas) / c)  # Eq. 67
-    t_R = t[:, None] + (2 * l / c if timing == "deep" else np.zeros_like(l))  # Eq. 68; "shallow": no flight
+    t_R = t[:, None] + (np.zeros_like(l) if timing == "shallow" else 2 * l / c)  # Eq. 68; "shallow": no flight
     d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential)
     u_R = np.sum(w_R * d_R, axis=-1)
     rho = ratio_from_radial(v_meas, c)
@@ -103,7 +103,7 @@ def _water(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, vessel_ve
     d_T, w_T, Lam_T = _beam_state(attitude, t[:, None], Lst, B, r, tangential)
     u_T = np.sum((w_T + vessel_velocity[:, None, :]) * d_T, axis=-1)  # (N, 4)
     l = (cells[None, None, :] - _transducer_depths(case, Lam_T, r)[..., None]) / d_T[..., 2][..., None]  # Eq. 86
-    t_R = t[:, None, None] + (2 * l / c if timing == "deep" else np.zeros_like(l))  # Eq. 87
+    t_R = t[:, None, None] + (np.zeros_like(l) if timing == "shallow" else 2 * l / c)  # Eq. 87
     d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential)  # (N, 4, K, 3)
     u_R = np.sum((w_R + vessel_velocity[:, None, None, :]) * d_R, axis=-1)  # (N, 4, K)
     rho = ratio_from_radial(case.water.radial_m_s, c)  # (N, 4, K)
@@ -209,13 +209,18 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     attitude : AttitudeParams, optional
         Attitude model of this run in the sensor frame (default: fitted to its samples).
     timing : str
-        ``deep`` (transmit and receive at their own times, Eqs. 66-70) or ``shallow``
-        (the paper's shallow-water approximation: the round trip taken as instantaneous).
+        ``deep`` (transmit and receive at their own times, Eqs. 66-70), ``shallow``
+        (the paper's shallow-water approximation: the round trip taken as instantaneous)
+        or ``exact`` (rootfinder and oracle: the travel time solved with the transducer
+        moving during the flight, :mod:`adcpdyn.models.measurement`).
     rootfinder_options : RootfinderOptions, optional
         Newton steps, threads and compilation of the exact solve (``rootfinder``, ``oracle``).
     """
-    if timing not in ("deep", "shallow"):
-        raise ValueError(f"timing: expected 'deep' or 'shallow', got {timing!r}")
+    if timing not in ("deep", "shallow", "exact"):
+        raise ValueError(f"timing: expected 'deep', 'shallow' or 'exact', got {timing!r}")
+    if timing == "exact" and method not in ("rootfinder", "oracle"):
+        raise ValueError(f"timing: 'exact' (travel time with the moving transducer) is for the rootfinder and the "
+                         f"oracle; method {method!r} uses Eq. 68's travel time ('deep')")
     if method not in METHODS:
         raise ValueError(f"method: expected one of {list(METHODS)}, got {method!r}")
     if method == "oracle":

@@ -38,7 +38,7 @@ from .formulations import AXES, FORMULATIONS, lever_block
 from .row_jacobian import RowBlock, RowJacobian
 from .uncertainty import Uncertainty, uncertainty
 
-TIMINGS = ("auto", "shallow", "deep")
+TIMINGS = ("auto", "shallow", "deep", "exact")
 METHODS = ("joint", "two-stage")
 TANGENTIALS = ("consistent", "paper_literal")
 DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
@@ -61,7 +61,8 @@ class CalibrationConfig:
     seed : int
         Seed of the start design.
     timing : str
-        ``auto`` (deep when the round trip exceeds 1% of the motion period), ``shallow`` or ``deep``.
+        ``auto`` (deep when the round trip exceeds 1% of the motion period), ``shallow``,
+        ``deep`` or ``exact`` (deep with the travel time solved for the moving transducer).
     max_modes : int
         Most damped modes per axis tried by the pre-fit's information criterion.
     modes : int, optional

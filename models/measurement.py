@@ -13,6 +13,11 @@ frame the sensor is in, because Lambda_tb is constant.
   ratio (c + u(t_R)) / (c - u(t_T)) (Eq. 70) turned into a radial velocity with the
   instrument's formula (Eq. 65). The vessel velocity is taken constant over the
   ping, as the paper assumes.
+* ``exact``: as ``deep``, but the travel time solved exactly with the transducer moving
+  during the flight: out along the beam to the bottom spot S (distance l), back to
+  where the transducer is at t_R, |T(t_R) - S| = c (t_R - t_T) - l, by fixed-point
+  iteration (each gains a factor u/c ~ 1e-3; ``EXACT_TIME_ITERATIONS``), with
+  T(t) = G(t_T) + V (t - t_T) + Lambda(t) r. Range = c (t_R - t_T) / 2.
 
 Range and receive time include, to first order in u/c, the transducer moving along
 the beam during the flight (the echo returns to where the transducer has gone): the
@@ -28,7 +33,8 @@ from .doppler import bottom_echo_ratio, radial_from_ratio, receive_time_paper, s
 from .kinematics import beam_directions_earth, tangential_velocity_paper_literal, transducer_velocity_earth
 from .rotations import euler_matrix
 
-TIMINGS = ("shallow", "deep")
+TIMINGS = ("shallow", "deep", "exact")
+EXACT_TIME_ITERATIONS = 4  # from t_R = t_T + 2 l / c: error ~ (u/c)^k of the flight time
 TANGENTIALS = ("consistent", "paper_literal")
 
 
@@ -64,21 +70,31 @@ def bottom_track_function(attitude_fun: ca.Function, timing: str, tangential: st
         else:
             v = tangential_velocity_paper_literal(Omega, r) + ca.repmat(v_a.T, 4, 1)  # Eqs. 31, 49
         z = g_depth + ca.mtimes(r, Lam[2, :].T)  # depth of each transducer (Eq. 66)
-        return d, v, z
+        return d, v, z, Lam
 
-    d_T, v_T, z_T = state(t_T)
+    d_T, v_T, z_T, Lam_T = state(t_T)
     u_tx = ca.sum2(v_T * d_T)
-    l = slant_range(depth, z_T, d_T[:, 2]) * (1 - u_tx / c)  # Eq. 67, moving transducer
+    l_out = slant_range(depth, z_T, d_T[:, 2])  # Eq. 67: transmit point to the bottom spot
+    l = l_out * (1 - u_tx / c)  # range the instrument reports, transducer moving along the beam
     if timing == "shallow":
         radial = u_tx  # Eq. 52 in instrument sign
     else:
-        parts = []
+        parts, ranges = [], []
         for i in range(4):
             t_R = receive_time_paper(t_T, l[i], c)  # Eq. 68
-            d_R, v_R, _ = state(t_R)
+            if timing == "exact":  # positions relative to G(t_T)
+                spot = ca.mtimes(Lam_T, r[i, :].T) + l_out[i] * d_T[i, :].T
+                for _ in range(EXACT_TIME_ITERATIONS):
+                    Lam_R = attitude_fun(t_R, p)[1]
+                    back = ca.norm_2(spot - (v_a * (t_R - t_T) + ca.mtimes(Lam_R, r[i, :].T)))
+                    t_R = t_T + (l_out[i] + back) / c
+                ranges.append(c * (t_R - t_T) / 2)
+            d_R, v_R, _, _ = state(t_R)
             u_rx = ca.dot(v_R[i, :], d_R[i, :])
             parts.append(radial_from_ratio(bottom_echo_ratio(u_tx[i], u_rx, c), c))  # Eqs. 70, 65
         radial = ca.vertcat(*parts)
+        if timing == "exact":
+            l = ca.vertcat(*ranges)
     return ca.Function(
         f"bottom_track_{timing}_{tangential}",
         [t_T, depth, g_depth, c, v_a, p, r, ypr_st, b_t],

@@ -139,3 +139,15 @@ def test_compiled_rootfinder_equals_interpreted(tmp_path, monkeypatch):
     cc = dynamic_correction(case, "rootfinder", calib, rootfinder_options=RootfinderOptions(compile="always"))
     assert np.nanmax(np.abs(vm.vessel_velocity_m_s - cc.vessel_velocity_m_s)) < 1e-12
     assert list(tmp_path.iterdir()) == []  # the compiler's files stay out of the working folder
+
+
+def test_exact_travel_time_reproduces_the_simulator_in_deep_water():
+    """The oracle with the travel time solved for the moving transducer against the simulator's
+    own fixed-point echoes (noise-free deep_ocean): the first-order model leaves ~1e-5 m/s."""
+    case = simulate(noise_free(get_scenario("deep_ocean")), seed=1)
+    truth = case.truth.vessel_velocity_m_s
+    err = {t: np.nanmax(np.abs(dynamic_correction(case, "oracle", timing=t).vessel_velocity_m_s - truth))
+           for t in ("deep", "exact")}
+    assert err["exact"] < 1e-9 < 1e-6 < err["deep"]
+    with pytest.raises(ValueError, match="exact"):
+        dynamic_correction(case, "adc", truth_calibration(case), timing="exact")

@@ -151,15 +151,16 @@ def test_deep_measurement_model_matches_independent_simulator():
     r = case.truth.radius_vectors_m
     g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
     out = {}
-    for timing in ("deep", "shallow"):
+    rel = {}
+    for timing in ("exact", "deep", "shallow"):
         f = bottom_track_function(att, timing).map(case.pings.n)
         radial, rng = f(case.pings.time_s[None, :], case.environment.water_depth_m, g_depth,
                       case.instrument.sound_speed_m_s, case.truth.vessel_velocity_m_s.T, params.pack(), r,
                       case.truth.installation_ypr_rad, case.instrument.beam_directions())
         out[timing] = np.asarray(radial).T - case.pings.bt_radial_m_s
-        if timing == "deep":
-            rel = np.asarray(rng).T / case.pings.bt_range_m - 1  # 350 m slant ranges, 0.45 s flights
-            assert np.max(np.abs(rel)) < 2e-4
+        rel[timing] = np.max(np.abs(np.asarray(rng).T / case.pings.bt_range_m - 1))  # 350 m slant ranges, 0.45 s flights
+    assert rel["deep"] < 2e-4 and rel["exact"] < 1e-12
+    assert np.max(np.abs(out["exact"])) < 1e-10  # the simulator's fixed-point travel time, solved symbolically
     assert np.max(np.abs(out["deep"])) < 2e-3  # only the exact-vs-first-order travel time differs
     assert np.sqrt(np.mean(out["shallow"] ** 2)) > 5 * np.sqrt(np.mean(out["deep"] ** 2))
 
