@@ -38,6 +38,7 @@ class CorrectJob:
     out_path: str
     method: str
     calibration_path: str | None = None
+    timing: str = "deep"
 
 
 def _calibrate(job: CalibrateJob) -> dict:
@@ -67,7 +68,7 @@ def _correct(job: CorrectJob) -> dict:
     if job.calibration_path is not None:
         with open(job.calibration_path) as fh:
             calibration = json.load(fh)
-    result = correct_case(read_case(job.case_path), job.method, calibration)
+    result = correct_case(read_case(job.case_path), job.method, calibration, job.timing)
     write_correction(result, job.out_path, source_case=job.case_path)
     v = result.vessel_velocity_m_s
     return {"success": True, "method": result.method, "pings": len(v),

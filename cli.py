@@ -129,13 +129,14 @@ def cmd_correct(args) -> int:
             raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {args.method!r}")
         paths, out = collect_case_paths(args.case), _batch_out(args)
         calib = str(Path(args.calibration).resolve()) if args.calibration else None
-        jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib) for p in paths]
+        jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing)
+                for p in paths]
         return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
     refuse_overwrite_input(args.out, args.case, args.calibration)
     case = _read(args.case)
-    result = _correct(case, args.method, _load_calibration(args.calibration))
+    result = _correct(case, args.method, _load_calibration(args.calibration), args.timing)
     write_correction(result, args.out, source_case=str(args.case))
     v = result.vessel_velocity_m_s
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
@@ -421,6 +422,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
     batch_options(s)
     s.add_argument("--method", default="asc", help="asc | adc | paper_literal | rootfinder | oracle")
+    s.add_argument("--timing", default="deep",
+                   help="deep (Eqs. 66-70) | shallow | exact (rootfinder, oracle: travel time with the moving transducer)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
     s.add_argument("--out", required=True, help="output file; with many cases, a folder")
     s.set_defaults(func=cmd_correct)

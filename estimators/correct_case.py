@@ -17,10 +17,10 @@ def installation_from(calibration: dict) -> np.ndarray:
     return np.asarray(value, dtype=float)
 
 
-def correct_case(case: Case, method: str, calibration: dict | None):
+def correct_case(case: Case, method: str, calibration: dict | None, timing: str = "deep"):
     """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
-    sensor, its heading misalignment) or a
-    dynamic method of :func:`~adcpdyn.estimators.adc.dynamic_correction`."""
+    sensor, its heading misalignment) or a dynamic method of
+    :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``."""
     from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
@@ -31,4 +31,4 @@ def correct_case(case: Case, method: str, calibration: dict | None):
         if calibration is not None and case.attitude.frame == "vessel":
             ypr = installation_from(calibration)
         return asc(with_heading_misalignment(case, calibration), ypr)
-    return dynamic_correction(case, method, calibration)
+    return dynamic_correction(case, method, calibration, timing=timing)

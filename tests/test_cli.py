@@ -101,3 +101,16 @@ def test_every_builtin_scenario_simulates_reads_and_corrects(tmp_path, scenario)
     case = tmp_path / f"{scenario}.h5"
     assert main(["simulate", scenario, "--seed", "1", "--out", str(case)]) == 0
     assert main(["correct", str(case), "--out", str(tmp_path / "o.h5")]) == 0
+
+
+def test_correct_oracle_with_exact_timing_and_a_clear_error_for_the_closed_form(tmp_path, capsys):
+    case = tmp_path / "d.h5"
+    assert main(["simulate", "deep_ocean", "--seed", "1", "--out", str(case)]) == 0
+    out = tmp_path / "d_oracle.h5"
+    assert main(["correct", str(case), "--method", "oracle", "--timing", "exact", "--out", str(out)]) == 0
+    corr = read_correction(out)
+    assert np.all(np.isfinite(corr["vessel_velocity_m_s"][corr["beams_used"] == 4]))
+    assert main(["correct", str(case), "--method", "asc", "--timing", "exact", "--out", str(tmp_path / "x.h5")]) == 0
+    assert main(["correct", str(case), "--method", "adc", "--timing", "exact", "--out", str(tmp_path / "y.h5")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "timing" in err and "exact" in err
