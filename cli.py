@@ -233,7 +233,8 @@ def cmd_calibrate(args) -> int:
         print(f"  r{i + 1}: {cells}")
     if np.isfinite(result.heading_misalignment_se_rad):
         print(f"heading misalignment against the reference (deg): {np.rad2deg(result.heading_misalignment_rad):+.4f} "
-              f"+- {np.rad2deg(result.heading_misalignment_se_rad):.4f}")
+              f"+- {np.rad2deg(result.heading_misalignment_se_rad):.4f} (head sensor: written as the installation yaw; "
+              f"installation pitch and roll not determined)")
     if result.installation_determined:
         print("installation yaw/pitch/roll (deg): " + ", ".join(
             f"{np.rad2deg(v):+.4f} +- {np.rad2deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad)))

@@ -211,6 +211,13 @@ class CalibrationResult:
             "warnings": self.warnings,
             "config": {k: v for k, v in asdict(self.config).items() if k != "solver"},
         }
+        if self.attitude_frame == "transducer" and np.isfinite(self.heading_misalignment_se_rad):
+            # A head sensor's installation yaw against the reference is its heading misalignment: the
+            # angle from the bottom-track course to the GNSS course (Qiao et al.'s Eq. 5 yaw); the
+            # installation pitch and roll stay undetermined.
+            out["installation_ypr_rad"][0] = self.heading_misalignment_rad
+            out["installation_ypr_se_rad"][0] = self.heading_misalignment_se_rad
+            out["installation_yaw_is"] = "heading_misalignment (head sensor: course of bottom track -> course of the reference)"
         if self.attitude_frame == "transducer":
             out["radius_vectors_head_m"] = determined(self.lever_arms_sensor_m, self.lever_arms_sensor_se_m)
             out["radius_vectors_head_se_m"] = self.lever_arms_sensor_se_m.tolist()

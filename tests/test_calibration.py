@@ -130,6 +130,9 @@ def test_head_sensor_heading_misalignment_against_reference_and_applied_by_corre
     assert abs(r.heading_misalignment_rad + offset) < Z_MAX * r.heading_misalignment_se_rad
     assert r.heading_misalignment_se_rad < np.deg2rad(0.5)
     calib = json.loads(json.dumps(r.to_dict()))
+    assert calib["installation_ypr_rad"][0] == calib["heading_misalignment_rad"]  # the yaw against the reference
+    assert np.all(np.isnan(np.array(calib["installation_ypr_rad"][1:], dtype=float)))  # null: not determined
+    assert not calib["installation_determined"]
     truth = case.truth.vessel_velocity_m_s[:, :2]
     course_error = {}
     for name, c in (("with", calib), ("without", {k: v for k, v in calib.items() if k != "heading_misalignment_rad"})):
