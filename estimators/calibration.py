@@ -500,9 +500,7 @@ class CalibrationProblem:
         if self.knots is not None:
             k = len(self.knots)
             knot_cols = (len(self.names) - 3 * k + np.arange(3 * k)).reshape(k, 3)
-        jac = RowJacobian(z, shared_z, blocks, n_rows, knot_cols, self.scale)
-        jac.n_p = n_rows
-        return jac
+        return RowJacobian(z, shared_z, blocks, n_rows, knot_cols, self.scale)
 
     # ------------------------------------------------------------------ helpers
     def _attitude_bounds(self, params: AttitudeParams):

@@ -47,6 +47,7 @@ class RowJacobian:
     def __init__(self, z: ca.MX, shared: ca.MX, blocks: list[RowBlock], n_rows: int,
                  knot_columns: np.ndarray | None = None, knot_scale: np.ndarray | None = None):
         self.n_rows, self.n_z = n_rows, z.shape[0]
+        self.n_p = n_rows  # the NLP's parameters are the residual weights, one per row
         self._shared = ca.Function("shared", [z], [shared, ca.jacobian(shared, z)])
         ds = self._shared.sparsity_out(1)
         self._shared_cols = np.unique(np.asarray(ds.get_triplet()[1], dtype=int))
