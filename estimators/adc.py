@@ -58,8 +58,12 @@ def _beam_state(attitude: AttitudeParams, times: np.ndarray, Lst, B, r, tangenti
 
 def _transducer_depths(case: Case, Lam_T: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Depth of each transducer at transmit, (N, 4) (Eq. 66); G sits below the level head by r_z."""
-    g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
-    return g_depth + np.einsum("nj,kj->nk", Lam_T[:, 0, 2, :], r)
+    return _g_depth(case, r) + np.einsum("nj,kj->nk", Lam_T[:, 0, 2, :], r)
+
+
+def _g_depth(case: Case, r: np.ndarray) -> float:
+    """Depth of the centre of rotation G: below the level head's transducers by their mean r_z."""
+    return case.environment.transducer_depth_m - r[:, 2].mean()
 
 
 def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str, timing: str = "deep",
@@ -151,10 +155,9 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
     if full.size:
         _, e_row = beam_to_instrument(B)
         r = np.asarray(lever_arms_s, dtype=float)
-        g_depth = case.environment.transducer_depth_m - r[:, 2].mean()
         depth = case.environment.depth_at_pings(N)[full]
         V[full], err[full], res, info["rootfinder_fallback_pings"] = solve_bottom_track(
-            attitude.layout, attitude.pack(), r, ypr_st, g_depth, case.pings.time_s[full], depth, bt[full],
+            attitude.layout, attitude.pack(), r, ypr_st, _g_depth(case, r), case.pings.time_s[full], depth, bt[full],
             case.instrument.sound_speed_m_s, B, error_direction(e_row), timing, options)
         info["rootfinder_unconverged_pings"] = int(np.sum(~(res <= NEWTON_RESIDUAL_TOL)))
     three = np.flatnonzero(n_good == 3)

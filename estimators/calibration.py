@@ -32,6 +32,7 @@ from ..models.janus import beam_to_instrument
 from ..models.measurement import bottom_track_function
 from ..models.motion import AttitudeLayout, AttitudeParams, attitude_function
 from ..models.rotations import course_difference_rad, euler_matrix
+from ..models.sensors import reference_point_velocity
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from .attitude_fit import AttitudeFit, fit_attitude
 from .formulations import AXES, FORMULATIONS, lever_block
@@ -387,7 +388,8 @@ class CalibrationProblem:
                        ca.transpose(ypr_model[2, :]) - ypr_meas[:, 2]]
             self.channels += [("heading", M), ("pitch", M), ("roll", M)]
         # bottom track and ranges
-        bt_fun = bottom_track_function(att_fun, self.timing, config.tangential).map(N)
+        self.bottom_track = bottom_track_function(att_fun, self.timing, config.tangential)  # one ping
+        bt_fun = self.bottom_track.map(N)
         depth = case.environment.depth_at_pings(N)
         g_depth = case.environment.transducer_depth_m - ca.sum1(self.lever.r[:, 2]) / 4
         radial, rng = bt_fun(ca.DM(pings.time_s).T, ca.DM(depth).T, g_depth, case.instrument.sound_speed_m_s,
@@ -410,6 +412,7 @@ class CalibrationProblem:
             p_ref = np.asarray(ref.point_body_m, dtype=float)
             if self.head_sensor:  # dLambda p = dLambda_h Lambda_tb^T p with the nominal Lambda_tb
                 p_ref = np.asarray(euler_matrix(*config.nominal_installation_ypr_rad)).T @ p_ref
+            self.reference_point_sensor = p_ref
             v_ref_model = ca.mtimes(ca.DM(_hat_basis(ref.time_s, self.knots)), V) if V is not None else ca.MX(L, 3)
             v_sensor = [v_ref_model[:, j] + ca.mtimes(ca.reshape(dLam[j, :], 3, L).T, ca.DM(p_ref)) for j in range(3)]
             if heading_offset is not None:  # the reference lives in the true Earth frame
@@ -420,7 +423,7 @@ class CalibrationProblem:
                 self.channels.append((f"reference_{AXES[j]}", L))
         raw = ca.vertcat(*models)
         self.masks = self._masks()
-        n_nodes = (bottom_track_function(att_fun, self.timing, config.tangential).n_instructions() * N
+        n_nodes = (self.bottom_track.n_instructions() * N
                    + att_fun.n_instructions() * ((0 if self.two_stage else M) + (ref.time_s.size if self.use_reference else 0)))
         self.assembled = config.jacobian == "assembled" or (config.jacobian == "auto" and n_nodes > ASSEMBLED_MIN_NODES)
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
@@ -473,8 +476,7 @@ class CalibrationProblem:
                                    sign=np.array([-1.0, 1.0, 1.0])))  # heading residual is measured - model
             offset += 3 * a.time_s.size
         pings = case.pings
-        bt = bottom_track_function(att_fun, self.timing, self.config.tangential)
-        radial, rng = bt(d2[0], d2[1], g_depth, case.instrument.sound_speed_m_s, v, p_att, r, ypr_beams,
+        radial, rng = self.bottom_track(d2[0], d2[1], g_depth, case.instrument.sound_speed_m_s, v, p_att, r, ypr_beams,
                          ca.DM(self.beam_dirs_t))
         out = ca.vertcat(radial, rng) if self.use_ranges else radial
         data = np.vstack([pings.time_s, case.environment.depth_at_pings(pings.n)])
@@ -483,11 +485,7 @@ class CalibrationProblem:
         offset += out.shape[0] * pings.n
         if self.use_reference:
             ref = case.reference
-            dLam = att_fun(d1, p_att)[2]
-            p_ref = np.asarray(ref.point_body_m, dtype=float)
-            if self.head_sensor:
-                p_ref = np.asarray(euler_matrix(*self.config.nominal_installation_ypr_rad)).T @ p_ref
-            vs = v + ca.mtimes(dLam, ca.DM(p_ref))
+            vs = reference_point_velocity(v, att_fun(d1, p_att)[2], ca.DM(self.reference_point_sensor))
             if self.head_yaw:
                 d = s[n_s - 1]
                 vs = ca.vertcat(ca.cos(d) * vs[0] - ca.sin(d) * vs[1], ca.sin(d) * vs[0] + ca.cos(d) * vs[1], vs[2])
