@@ -328,7 +328,10 @@ class CalibrationProblem:
         self.head_yaw = bool(self.head_sensor and not self.two_stage and ref is not None and not ref.stationary
                          and ref.velocity_m_s is not None)
         self.fixed_installation = (self.head_sensor and not self.head_yaw) or self.two_stage
-        self.yaw_guess = self._yaw_guess() if self.head_yaw else 0.0
+        # Against a moving reference the course offset gives the yaw whatever its size (a head turned 45
+        # degrees from the bow, a compass off by tens of degrees): the yaw's box is centred there.
+        moving_reference = ref is not None and not ref.stationary and ref.velocity_m_s is not None
+        self.yaw_guess = self._yaw_guess() if self.head_yaw or (moving_reference and not self.fixed_installation) else 0.0
         heading_offset = None
         if self.head_yaw:  # Earth-frame heading offset: true Earth = Rz(d) (the sensor's Earth); beams stay put
             heading_offset = ca.MX.sym("heading_misalignment", 1)
@@ -341,7 +344,8 @@ class CalibrationProblem:
         else:
             ypr_st = ca.MX.sym("installation", 3)
             b = config.installation_bound_rad
-            add(ypr_st, list(ANGLE_NAMES), [0.02] * 3, [-b] * 3, [b] * 3)
+            centre = np.array([self.yaw_guess, 0.0, 0.0])
+            add(ypr_st, list(ANGLE_NAMES), [0.02] * 3, list(centre - b), list(centre + b))
         ypr_beams = ca.MX(ca.DM.zeros(3)) if self.head_yaw else ypr_st
         Lst = euler_matrix(ypr_beams[0], ypr_beams[1], ypr_beams[2])
         self.lever = lever_block(config.formulation, Lst, self.pos_t, config.epsilon_rel)
@@ -597,8 +601,9 @@ class CalibrationProblem:
             for row in u:
                 centre = row[:3] * self.lever_box
                 angles = np.zeros(3) if self.fixed_installation else row[3:6] * self.config.installation_bound_rad
+                angles[0] += self.yaw_guess
                 if self.head_yaw:
-                    angles = np.array([self.yaw_guess + angles[0], 0.0, 0.0])
+                    angles[1:] = 0.0
                 starts.append(self._x_from(self._jitter(self.fit.params, row[6], row[7]), angles, centre))
         x0 = np.array(starts)
         x0 = np.clip(x0, self.lbx, self.ubx)
@@ -757,6 +762,15 @@ class CalibrationProblem:
                 warn.append("two-stage method: installation angles held at their nominal values, not estimated")
             else:
                 ypr_se[~unc.determined_mask(Jst)] = np.inf
+                i_angles = np.array([self.names.index(n) for n in ANGLE_NAMES])
+                span = self.ubx[i_angles] - self.lbx[i_angles]
+                at_box = np.minimum(x[i_angles] - self.lbx[i_angles], self.ubx[i_angles] - x[i_angles]) < 1e-3 * span
+                if at_box.any():
+                    ypr_se[at_box] = np.inf
+                    warn.append(f"installation angle(s) {', '.join(np.array(ANGLE_NAMES)[at_box])} held by the search box "
+                                f"(+-{np.rad2deg(self.config.installation_bound_rad):g} deg around "
+                                f"({np.rad2deg(self.yaw_guess):+.2f}, 0, 0) deg): not determined, reported as null; widen "
+                                "installation_bound_rad or check the attitude reference")
         for msg in warn:
             warnings.warn(msg, stacklevel=3)
         vk = None

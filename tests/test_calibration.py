@@ -114,6 +114,32 @@ def test_vessel_frame_installation_yaw_against_reference():
     assert r.installation_ypr_se_rad[0] < np.deg2rad(0.1)
 
 
+def test_vessel_frame_large_installation_yaw_found_against_reference():
+    """A head turned 40 degrees from the bow (an Ocean Surveyor's 45-degree mount, a gyro as the
+    attitude reference): far outside the default angle box, found from the course offset."""
+    sc = get_scenario("deep_ship")
+    mounting = dataclasses.replace(sc.platform.mounting, installation_ypr_rad=(np.deg2rad(40.0), 0.006, -0.004))
+    sc = dataclasses.replace(sc, platform=dataclasses.replace(sc.platform, mounting=mounting),
+                             run=dataclasses.replace(sc.run, duration_s=150.0, water_depth_m=12.0))
+    case = simulate(sc, seed=4)
+    r = _quiet_calibrate(case, formulation="minimal", n_starts=3, timing="shallow")
+    assert r.success and r.installation_determined
+    z = (r.installation_ypr_rad - case.truth.installation_ypr_rad) / r.installation_ypr_se_rad
+    assert np.all(np.abs(z) < Z_MAX)
+    assert abs(r.installation_ypr_rad[0] - np.deg2rad(40.0)) < np.deg2rad(0.2)
+
+
+def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
+    sc = get_scenario("deep_ship")  # pitch 0.35 deg, roll -0.25 deg: outside a 0.1-degree box
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0, water_depth_m=12.0))
+    case = simulate(sc, seed=4)
+    with pytest.warns(UserWarning, match="held by the search box"):
+        r = CalibrationProblem(case, CalibrationConfig(formulation="minimal", n_starts=2, timing="shallow",
+                                                       installation_bound_rad=np.deg2rad(0.1))).solve()
+    assert np.isinf(r.installation_ypr_se_rad[1]) and not r.installation_determined
+    assert np.isnan(r.to_dict()["installation_ypr_rad"][1])  # null in CALIB.json
+
+
 def test_head_sensor_heading_misalignment_against_reference_and_applied_by_correct():
     """A head compass reading 25 degrees too far clockwise: calibration finds -25 degrees and the
     static correction with that CALIB.json follows the true course, while without it it does not."""
