@@ -193,7 +193,7 @@ def _calibration_config(args, formulation=None):
 
     return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
-                             jacobian=getattr(args, "jacobian", "auto"))
+                             jacobian=getattr(args, "jacobian", "auto"), attitude=getattr(args, "attitude", "auto"))
 
 
 def cmd_calibrate(args) -> int:
@@ -222,7 +222,7 @@ def cmd_calibrate(args) -> int:
     result.to_json(args.out)
     ms = result.multistart
     print(f"{case.name}: {args.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
-          f"{result.jacobian} Jacobian")
+          f"{result.jacobian} Jacobian, beams' attitude from the {result.attitude_source}")
     print(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
           f"{result.max_constraint_violation:.2e}; {ms.time_s:.2f} s")
     label = "head-frame lever arms (m)" if result.attitude_frame == "transducer" else "radius vectors, body frame (m)"
@@ -442,6 +442,9 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--method", default="joint", help="joint | two-stage")
         s.add_argument("--timing", default="auto", help="auto | shallow | deep | exact bottom-track model")
         s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
+        s.add_argument("--attitude", default="auto",
+                       help="auto | model (damped-mode model fitted jointly) | samples (the sensor's samples, for runs "
+                            "no motion model follows)")
         s.add_argument("--jacobian", default="auto",
                        help="auto | symbolic (whole problem differentiated by CasADi) | assembled (per-row, long runs)")
 

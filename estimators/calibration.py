@@ -30,7 +30,8 @@ from scipy.stats import qmc
 from ..cases.case import Case
 from ..models.janus import beam_to_instrument
 from ..models.measurement import bottom_track_function
-from ..models.motion import AttitudeLayout, AttitudeParams, attitude_function
+from ..models.motion import (LOCAL_ATTITUDE_SIZE, AttitudeLayout, AttitudeParams, attitude_function,
+                             local_attitude_function, local_attitude_params)
 from ..models.rotations import course_difference_rad, euler_matrix
 from ..models.sensors import reference_point_velocity
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
@@ -40,6 +41,11 @@ from .row_jacobian import RowBlock, RowJacobian
 from .uncertainty import Uncertainty, uncertainty
 
 TIMINGS = ("auto", "shallow", "deep", "exact")
+ATTITUDES = ("auto", "model", "samples")
+MIN_SAMPLES_PER_PERIOD = 4  # attitude samples per motion period below which no motion model is identifiable
+# attitude pre-fit residual (heading, pitch, roll) above which the motion model does not follow the sensor:
+# several times a compass's / an inclinometer's noise (the paper's pool: 0.5 / 0.17 deg)
+MAX_MODEL_RESIDUAL_RAD = tuple(float(np.deg2rad(d)) for d in (2.0, 1.0, 1.0))
 METHODS = ("joint", "two-stage")
 TANGENTIALS = ("consistent", "paper_literal")
 DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
@@ -90,6 +96,13 @@ class CalibrationConfig:
         ``consistent`` (dLambda/dt r) or ``paper_literal`` (Omega r as printed).
     workers : int
         Threads solving starts at once.
+    attitude : str
+        Attitude of the beams: ``model`` (the damped-mode model fitted jointly, the paper's
+        method), ``samples`` (the sensor's samples interpolated linearly, fixed; for runs no
+        motion model follows: attitude sampled below the motion, long records with turns) or
+        ``auto`` (samples when the pre-fit leaves residuals above ``MAX_MODEL_RESIDUAL_RAD``).
+        With samples, lever arms are reported only when the samples resolve the motion
+        (at least ``MIN_SAMPLES_PER_PERIOD`` per period of the pre-fit's dominant mode).
     jacobian : str
         Residual Jacobian (Gauss-Newton Hessian, standard errors): ``symbolic`` (the whole
         problem expanded to SX and differentiated by CasADi), ``assembled`` (per-row
@@ -114,6 +127,7 @@ class CalibrationConfig:
     epsilon_rel: float = 0.05
     use_ranges: bool = True
     workers: int = 2
+    attitude: str = "auto"
     jacobian: str = "auto"
     solver: SolverOptions = field(default_factory=SolverOptions)
 
@@ -126,6 +140,8 @@ class CalibrationConfig:
             raise ValueError(f"CalibrationConfig.method: expected one of {list(METHODS)}, got {self.method!r}")
         if self.tangential not in TANGENTIALS:
             raise ValueError(f"CalibrationConfig.tangential: expected one of {list(TANGENTIALS)}, got {self.tangential!r}")
+        if self.attitude not in ATTITUDES:
+            raise ValueError(f"CalibrationConfig.attitude: expected one of {list(ATTITUDES)}, got {self.attitude!r}")
         if self.jacobian not in JACOBIANS:
             raise ValueError(f"CalibrationConfig.jacobian: expected one of {list(JACOBIANS)}, got {self.jacobian!r}")
         if int(self.n_starts) < 1:
@@ -165,6 +181,8 @@ class CalibrationResult:
     heading_misalignment_se_rad: float = float("inf")
     warnings: list = field(default_factory=list)
     jacobian: str = "symbolic"  # how the residual Jacobian was formed: symbolic or assembled per row
+    attitude_source: str = "model"  # the beams' attitude: the fitted model or the sensor's samples
+    attitude_source_reason: str = ""
 
     @property
     def success(self) -> bool:
@@ -187,6 +205,8 @@ class CalibrationResult:
             "heading_misalignment_se_rad": self.heading_misalignment_se_rad,
             "attitude_frame": self.attitude_frame,
             "attitude_model": self.attitude.to_dict(),
+            "attitude_source": self.attitude_source,
+            "attitude_source_reason": self.attitude_source_reason,
             "objective": self.objective,
             "max_constraint_violation": self.max_constraint_violation,
             "formulation": self.formulation,
@@ -273,6 +293,22 @@ def choose_timing(case: Case, fit: AttitudeFit, requested: str = "auto") -> str:
     return "deep" if round_trip > DEEP_TIMING_FRACTION * dominant_period_s(fit) else "shallow"
 
 
+def samples_per_period(case: Case, fit: AttitudeFit) -> float:
+    """Attitude samples per period of the pre-fit's dominant mode (inf without a mode)."""
+    return dominant_period_s(fit) / float(np.median(np.diff(case.attitude.time_s)))
+
+
+def choose_attitude(case: Case, fit: AttitudeFit, requested: str = "auto") -> tuple[str, str]:
+    """``model`` or ``samples`` for the beams' attitude, and why."""
+    if requested != "auto":
+        return requested, "requested"
+    excess = np.asarray(fit.sigmas) > np.asarray(MAX_MODEL_RESIDUAL_RAD)
+    if excess.any():
+        left = ", ".join(f"{n} {np.rad2deg(v):.2f} deg" for n, v, e in zip(("heading", "pitch", "roll"), fit.sigmas, excess) if e)
+        return "samples", f"the damped-mode model leaves {left} of residual: turns or irregular motion it cannot follow"
+    return "model", "the damped-mode model follows the attitude samples"
+
+
 def bt_noise_from_error_velocity(case: Case) -> float:
     """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
     B = case.instrument.beam_directions()
@@ -294,11 +330,16 @@ class CalibrationProblem:
         self.fit = fit or fit_attitude(case, max_modes=config.max_modes, fixed_modes=1 if self.two_stage else config.modes,
                                        per_axis=self.two_stage)
         self.timing = choose_timing(case, self.fit, config.timing)
+        self.attitude_source, self.attitude_reason = ("model", "two-stage method") if self.two_stage else \
+            choose_attitude(case, self.fit, config.attitude)
+        self.sampled = self.attitude_source == "samples"
+        self.frozen_attitude = self.two_stage or self.sampled  # no attitude unknowns, no attitude channels
         self.frame = case.attitude.frame
         self.head_sensor = self.frame == "transducer"
         layout = self.fit.params.layout
         self.layout = layout
-        att_fun = attitude_function(layout)
+        att_fun = local_attitude_function() if self.sampled else attitude_function(layout)
+        self.n_attitude = 0 if self.frozen_attitude else layout.size  # attitude unknowns
         self.attitude_fun = att_fun
         pings, N = case.pings, case.pings.n
         self.beam_dirs_t = case.instrument.beam_directions()
@@ -316,7 +357,11 @@ class CalibrationProblem:
             lb.extend(lo)
             ub.extend(hi)
 
-        if self.two_stage:  # stage 1 is done: the attitude model is frozen
+        if self.sampled:  # the samples about each row's time: data, one column per row
+            a = case.attitude
+            self.local_attitude = lambda times: local_attitude_params(a.time_s, a.ypr(), times)
+            p_att = ca.MX(0, 1)
+        elif self.two_stage:  # stage 1 is done: the attitude model is frozen
             p_att = ca.MX(ca.DM(self.fit.params.pack()))
         else:
             p_att = ca.MX.sym("attitude", layout.size)
@@ -384,7 +429,7 @@ class CalibrationProblem:
         # attitude samples (stage 1 of the two-stage method has used them already)
         a = case.attitude
         M = a.time_s.size
-        if not self.two_stage:
+        if not self.frozen_attitude:
             ypr_model, *_ = att_fun.map(M)(ca.DM(a.time_s).T, p_att)
             ypr_meas = a.ypr()
             dpsi = ypr_meas[:, 0] - ca.transpose(ypr_model[0, :])
@@ -396,8 +441,9 @@ class CalibrationProblem:
         bt_fun = self.bottom_track.map(N)
         depth = case.environment.depth_at_pings(N)
         g_depth = case.environment.transducer_depth_m - ca.sum1(self.lever.r[:, 2]) / 4
+        p_pings = ca.DM(self.local_attitude(pings.time_s)) if self.sampled else p_att
         radial, rng = bt_fun(ca.DM(pings.time_s).T, ca.DM(depth).T, g_depth, case.instrument.sound_speed_m_s,
-                             v_ping.T, p_att, self.lever.r, ypr_beams, ca.DM(self.beam_dirs_t))
+                             v_ping.T, p_pings, self.lever.r, ypr_beams, ca.DM(self.beam_dirs_t))
         bt = pings.bt_radial_m_s
         self.bt_mask = np.isfinite(bt)
         for i in range(4):
@@ -412,7 +458,8 @@ class CalibrationProblem:
         self.use_reference = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
         if self.use_reference:
             L = ref.time_s.size
-            _, _, dLam, _, _ = att_fun.map(L)(ca.DM(ref.time_s).T, p_att)
+            p_refs = ca.DM(self.local_attitude(ref.time_s)) if self.sampled else p_att
+            _, _, dLam, _, _ = att_fun.map(L)(ca.DM(ref.time_s).T, p_refs)
             p_ref = np.asarray(ref.point_body_m, dtype=float)
             if self.head_sensor:  # dLambda p = dLambda_h Lambda_tb^T p with the nominal Lambda_tb
                 p_ref = np.asarray(euler_matrix(*config.nominal_installation_ypr_rad)).T @ p_ref
@@ -428,7 +475,7 @@ class CalibrationProblem:
         raw = ca.vertcat(*models)
         self.masks = self._masks()
         n_nodes = (self.bottom_track.n_instructions() * N
-                   + att_fun.n_instructions() * ((0 if self.two_stage else M) + (ref.time_s.size if self.use_reference else 0)))
+                   + att_fun.n_instructions() * ((0 if self.frozen_attitude else M) + (ref.time_s.size if self.use_reference else 0)))
         self.assembled = config.jacobian == "assembled" or (config.jacobian == "auto" and n_nodes > ASSEMBLED_MIN_NODES)
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
         weights = ca.MX.sym("w", raw.shape[0])
@@ -466,34 +513,38 @@ class CalibrationProblem:
         Shared vector s = [attitude parameters, lever arms row by row, beam angles, depth of G,
         heading misalignment]; its layout here must match the one built in ``__init__``.
         """
-        case, att_fun, n_att = self.case, self.attitude_fun, self.layout.size
+        case, att_fun, n_att = self.case, self.attitude_fun, self.n_attitude
         n_s = shared_z.shape[0]
-        d1, d2, v, s = ca.SX.sym("d", 1), ca.SX.sym("d", 2), ca.SX.sym("v", 3), ca.SX.sym("s", n_s)
+        n_local = LOCAL_ATTITUDE_SIZE if self.sampled else 0  # per-row attitude data after time (and depth)
+        d1, d2 = ca.SX.sym("d", 1 + n_local), ca.SX.sym("d", 2 + n_local)
+        v, s = ca.SX.sym("v", 3), ca.SX.sym("s", n_s)
         p_att, r = s[:n_att], ca.reshape(s[n_att:n_att + 12], 3, 4).T
+        p_row1, p_row2 = (d1[1:], d2[2:]) if self.sampled else (p_att, p_att)
+        local = (lambda t: self.local_attitude(t)) if self.sampled else (lambda t: np.zeros((0, np.size(t))))
         ypr_beams, g_depth = s[n_att + 12:n_att + 15], s[n_att + 15]
         knots_basis = lambda t: None if self.knots is None else sp.csr_matrix(_hat_basis(t, self.knots))
         blocks, offset = [], 0
-        if not self.two_stage:
+        if not self.frozen_attitude:
             a = case.attitude
             ypr = att_fun(d1, p_att)[0]
             blocks.append(RowBlock(ca.Function("attitude_rows", [d1, v, s], [ypr]), a.time_s[None, :], offset,
                                    sign=np.array([-1.0, 1.0, 1.0])))  # heading residual is measured - model
             offset += 3 * a.time_s.size
         pings = case.pings
-        radial, rng = self.bottom_track(d2[0], d2[1], g_depth, case.instrument.sound_speed_m_s, v, p_att, r, ypr_beams,
-                         ca.DM(self.beam_dirs_t))
+        radial, rng = self.bottom_track(d2[0], d2[1], g_depth, case.instrument.sound_speed_m_s, v, p_row2, r, ypr_beams,
+                                        ca.DM(self.beam_dirs_t))
         out = ca.vertcat(radial, rng) if self.use_ranges else radial
-        data = np.vstack([pings.time_s, case.environment.depth_at_pings(pings.n)])
+        data = np.vstack([pings.time_s, case.environment.depth_at_pings(pings.n), local(pings.time_s)])
         blocks.append(RowBlock(ca.Function("bottom_track_rows", [d2, v, s], [out]), data, offset,
                                velocity_basis=knots_basis(pings.time_s)))
         offset += out.shape[0] * pings.n
         if self.use_reference:
             ref = case.reference
-            vs = reference_point_velocity(v, att_fun(d1, p_att)[2], ca.DM(self.reference_point_sensor))
+            vs = reference_point_velocity(v, att_fun(d1[0], p_row1)[2], ca.DM(self.reference_point_sensor))
             if self.head_yaw:
                 d = s[n_s - 1]
                 vs = ca.vertcat(ca.cos(d) * vs[0] - ca.sin(d) * vs[1], ca.sin(d) * vs[0] + ca.cos(d) * vs[1], vs[2])
-            blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), ref.time_s[None, :], offset,
+            blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), np.vstack([ref.time_s, local(ref.time_s)]), offset,
                                    velocity_basis=knots_basis(ref.time_s)))
             offset += 3 * ref.time_s.size
         if offset != n_rows:
@@ -554,7 +605,7 @@ class CalibrationProblem:
         return 0.1
 
     def _masks(self) -> np.ndarray:
-        parts = [] if self.two_stage else [np.ones(self.case.attitude.time_s.size)] * 3
+        parts = [] if self.frozen_attitude else [np.ones(self.case.attitude.time_s.size)] * 3
         parts += [self.bt_mask[:, i].astype(float) for i in range(4)]
         if self.use_ranges:
             parts += [np.isfinite(self.case.pings.bt_range_m[:, i]).astype(float) for i in range(4)]
@@ -564,7 +615,7 @@ class CalibrationProblem:
 
     def _initial_sigmas(self) -> dict:
         s = {"bt": bt_noise_from_error_velocity(self.case)}
-        if not self.two_stage:
+        if not self.frozen_attitude:
             s.update(heading=max(self.fit.sigmas[0], 1e-4), pitch=max(self.fit.sigmas[1], 1e-4),
                      roll=max(self.fit.sigmas[2], 1e-4))
         if self.use_ranges:
@@ -634,7 +685,7 @@ class CalibrationProblem:
         return dataclasses.replace(p, modes=modes)
 
     def _x_from(self, params: AttitudeParams, angles, centre) -> np.ndarray:
-        parts = [] if self.two_stage else [params.pack()]
+        parts = [] if self.frozen_attitude else [params.pack()]
         if self.head_yaw:
             parts.append(np.asarray(angles, dtype=float)[:1])
         elif not self.fixed_installation:
@@ -717,6 +768,9 @@ class CalibrationProblem:
         # held by the search box, or known no better than the box: the bound, not the data, set the number
         box_held = (np.abs(r_s) >= 0.999 * self.lever_box) | (se_r > self.lever_box)
         se_r[box_held] = np.inf
+        aliased = self.sampled and samples_per_period(self.case, self.fit) < MIN_SAMPLES_PER_PERIOD
+        if aliased:  # the rate between samples is not measured: the tangential velocity is not known
+            se_r[:] = np.inf
         sl = self.channel_slices()
         chi2 = {}
         for ch, s in sl.items():
@@ -727,9 +781,15 @@ class CalibrationProblem:
             g = g.ravel()
             viol = float(np.max(np.concatenate([np.maximum(self.lbg - g, 0), np.maximum(g - self.ubg, 0)])))
         x = ms.x * self.scale
-        p_att = self.fit.params if self.two_stage else AttitudeParams.unpack(x[: self.layout.size], self.layout)
+        p_att = self.fit.params if self.frozen_attitude else AttitudeParams.unpack(x[: self.layout.size], self.layout)
         warn = list(unc.warnings)
-        if box_held.any():
+        if self.sampled:
+            warn.append(f"beams' attitude from the sensor's samples, interpolated linearly ({self.attitude_reason}); "
+                        "attitude_model is the pre-fit, not used by the beams")
+        if aliased:
+            warn.append("lever arms not determined: the attitude samples do not resolve the motion, so the rotation "
+                        "rates between them (and the tangential velocity) are not measured; reported as null")
+        if box_held.any() and not aliased:
             warn.append(f"{int(box_held.sum())} lever-arm component(s) held by the search box (+-{self.lever_box:g} m) or "
                         f"known no better than it: not determined by this run (too little rotation), reported as null")
         if not ms.success:
@@ -786,7 +846,8 @@ class CalibrationProblem:
             x_names=list(self.names), x=x, x_se=se_x, config=self.config,
             velocity_knots_s=self.knots, velocity_knots_m_s=vk, heading_misalignment_rad=misalignment,
             heading_misalignment_se_rad=misalignment_se, warnings=warn,
-            jacobian="assembled" if self.assembled else "symbolic",
+            jacobian="assembled" if self.assembled else "symbolic", attitude_source=self.attitude_source,
+            attitude_source_reason=self.attitude_reason,
         )
 
 def channel_slices(channels: list[tuple[str, int]]) -> dict:

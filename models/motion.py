@@ -246,7 +246,36 @@ def attitude_function(layout: AttitudeLayout, sym=ca.SX) -> ca.Function:
     """
     t = sym.sym("t")
     p = sym.sym("p", layout.size)
-    ypr = attitude_ypr(t, p, layout)
+    return _attitude_from_ypr(t, p, attitude_ypr(t, p, layout))
+
+
+LOCAL_ATTITUDE_SIZE = 7
+
+
+def local_attitude_function(sym=ca.SX) -> ca.Function:
+    """The measured attitude about one time, as an attitude model: same signature as
+    :func:`attitude_function`, with p = [t_k, yaw, pitch, roll (rad), their rates (rad/s)]
+    and ypr(t) = ypr_k + rate (t - t_k). With p from :func:`local_attitude_params` it is
+    the sensor's samples interpolated linearly (used when no motion model fits the run)."""
+    t = sym.sym("t")
+    p = sym.sym("p", LOCAL_ATTITUDE_SIZE)
+    return _attitude_from_ypr(t, p, p[1:4] + p[4:7] * (t - p[0]))
+
+
+def local_attitude_params(time_s, ypr_rad, times) -> np.ndarray:
+    """(7, n) parameters of :func:`local_attitude_function` at ``times``: the samples'
+    linear interpolation (heading unwrapped) and the slope of the segment holding each time."""
+    time_s = np.asarray(time_s, dtype=float)
+    times = np.asarray(times, dtype=float).reshape(-1)
+    ypr = np.asarray(ypr_rad, dtype=float).copy()
+    ypr[:, 0] = np.unwrap(ypr[:, 0])
+    j = np.clip(np.searchsorted(time_s, times, side="right") - 1, 0, time_s.size - 2)
+    slope = (ypr[j + 1] - ypr[j]) / (time_s[j + 1] - time_s[j])[:, None]
+    at = ypr[j] + slope * (times - time_s[j])[:, None]
+    return np.vstack([times, at.T, slope.T])
+
+
+def _attitude_from_ypr(t, p, ypr) -> ca.Function:
     Lam = euler_matrix(ypr[0], ypr[1], ypr[2])
     dLam = ca.reshape(ca.jacobian(ca.vec(Lam), t), 3, 3)
     Omega = ca.mtimes(dLam, Lam.T)

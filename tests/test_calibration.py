@@ -129,6 +129,23 @@ def test_vessel_frame_large_installation_yaw_found_against_reference():
     assert abs(r.installation_ypr_rad[0] - np.deg2rad(40.0)) < np.deg2rad(0.2)
 
 
+def test_beams_attitude_from_samples_on_a_run_the_model_follows():
+    """Forced to use the sensor's samples (0.2-s attitude, 21 samples per roll period), the joint
+    calibration still finds the installation angles within 3 SE of truth and keeps the lever
+    arms; left to choose, it keeps the motion model, which follows these samples."""
+    sc = get_scenario("deep_ship")
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=150.0, water_depth_m=12.0))
+    case = simulate(sc, seed=4)
+    r = _quiet_calibrate(case, formulation="minimal", n_starts=2, timing="shallow", attitude="samples")
+    assert r.success and r.attitude_source == "samples" and r.to_dict()["attitude_source"] == "samples"
+    z = (r.installation_ypr_rad - case.truth.installation_ypr_rad) / r.installation_ypr_se_rad
+    assert np.all(np.abs(z) < Z_MAX)
+    assert np.all(np.isfinite(r.radius_vectors_se_m))
+    assert "heading" not in r.chi2_per_channel  # the samples are data here, not fitted
+    auto = CalibrationProblem(case, CalibrationConfig(n_starts=1, timing="shallow"))
+    assert auto.attitude_source == "model" and not auto.sampled
+
+
 def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
     sc = get_scenario("deep_ship")  # pitch 0.35 deg, roll -0.25 deg: outside a 0.1-degree box
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0, water_depth_m=12.0))
@@ -227,11 +244,13 @@ def test_qiao_baseline_finds_installation_yaw():
         qiao_calibration(simulate(get_scenario("pool_m1"), seed=1))
 
 
-@pytest.mark.parametrize("kind", ["head_sensor_still", "vessel_sensor_moving_deep", "head_sensor_moving"])
+@pytest.mark.parametrize("kind", ["head_sensor_still", "vessel_sensor_moving_deep", "head_sensor_moving",
+                                  "head_sensor_moving_samples"])
 def test_assembled_jacobian_equals_casadi_jacobian(kind):
     """The per-row assembled residual Jacobian (long runs) against casadi.jacobian of the whole
     expanded problem, on each layout of unknowns: still head sensor, vessel sensor with
-    velocity knots, GNSS and the deep-water model, head sensor with heading misalignment."""
+    velocity knots, GNSS and the deep-water model, head sensor with heading misalignment, and the
+    latter with the beams' attitude from the sensor's samples (per-row attitude data)."""
     from adcpdyn.estimators.calibration import CalibrationProblem
 
     if kind == "head_sensor_still":
@@ -245,12 +264,13 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind):
         sc = dataclasses.replace(sc, platform=dataclasses.replace(sc.platform, mounting=mounting),
                                  run=dataclasses.replace(sc.run, duration_s=30.0))
     case = simulate(sc, seed=2)
-    problems = {j: CalibrationProblem(case, CalibrationConfig(n_starts=2, seed=1, jacobian=j))
+    attitude = "samples" if kind == "head_sensor_moving_samples" else "model"
+    problems = {j: CalibrationProblem(case, CalibrationConfig(n_starts=2, seed=1, jacobian=j, attitude=attitude))
                 for j in ("assembled", "symbolic")}
     if kind == "vessel_sensor_moving_deep":
         assert problems["symbolic"].timing == "deep" and problems["symbolic"].knots is not None
-    if kind == "head_sensor_moving":
-        assert problems["symbolic"].head_yaw
+    if kind.startswith("head_sensor_moving"):
+        assert problems["symbolic"].head_yaw and problems["symbolic"].sampled == (attitude == "samples")
     z = problems["symbolic"].start_points(2, 1)[1]
     w = problems["symbolic"].weights()
     assembled = problems["assembled"].jacobian_fun(z, w)

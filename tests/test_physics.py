@@ -281,3 +281,27 @@ def test_chunked_attitude_evaluation_matches_single_calls():
     few = evaluate_attitude(TWO_AXES, t[pick])
     for key in ("ypr", "Lambda", "dLambda_dt"):
         assert np.array_equal(many[key][pick], few[key])
+
+
+def test_local_attitude_is_the_samples_linear_interpolation():
+    """The sampled-attitude model against np.interp of the samples (heading across north
+    unwrapped), and its dLambda/dt against a central difference of Lambda inside a segment."""
+    from adcpdyn.models.motion import local_attitude_function, local_attitude_params
+
+    rng = np.random.default_rng(3)
+    time_s = np.cumsum(rng.uniform(0.4, 0.8, 40))
+    ypr = np.column_stack([np.mod(6.1 + 0.02 * time_s, 2 * np.pi), 0.05 * np.sin(time_s), 0.1 * np.cos(1.3 * time_s)])
+    times = np.linspace(time_s[1], time_s[-2], 57)
+    P = local_attitude_params(time_s, ypr, times)
+    f = local_attitude_function()
+    unwrapped = np.unwrap(ypr[:, 0])
+    for k, t in enumerate(times):
+        out = f(t, P[:, k])
+        expected = [np.interp(t, time_s, unwrapped), np.interp(t, time_s, ypr[:, 1]), np.interp(t, time_s, ypr[:, 2])]
+        assert np.allclose(np.asarray(out[0]).ravel(), expected, atol=1e-12)
+        assert np.allclose(np.asarray(out[1]), np.asarray(euler_matrix(*expected)), atol=1e-12)
+        j = np.searchsorted(time_s, t, side="right") - 1
+        h = 1e-3 * min(t - time_s[j], time_s[j + 1] - t, 1.0)
+        if h > 1e-9:
+            fd = (np.asarray(f(t + h, P[:, k])[1]) - np.asarray(f(t - h, P[:, k])[1])) / (2 * h)
+            assert np.allclose(np.asarray(out[2]), fd, atol=1e-7)
