@@ -344,7 +344,8 @@ def cmd_diagnose(args) -> int:
     refuse_overwrite_input(args.out, args.case, args.calibration)
     case = _read(args.case)
     calibration = _load_calibration(args.calibration)
-    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
+    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
+                             attitude=args.attitude)
     result = diagnose(case, config, calibration=calibration)
     paths = write_report(result, args.out)
     print(table(result))
@@ -466,6 +467,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (start of the base fit)")
     s.add_argument("--out", help="DIAG.json (DIAG.md and a figure are written beside it)")
     s.add_argument("--effects", nargs="+", help="catalog effects to try (default: all)")
+    s.add_argument("--attitude", default="auto",
+                   help="auto | model (damped-mode motion model) | samples (the sensor's samples, runs no model follows)")
     s.add_argument("--selftest", type=int, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=int, default=0, help="seed of the self-test draws")
     s.add_argument("--scenario", default="diag_boat", help="scenario the self-test simulates")

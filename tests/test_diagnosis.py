@@ -149,3 +149,17 @@ def test_case_without_attitude_is_refused_in_one_line():
                                pitch_rad=0 * case.attitude.pitch_rad, roll_rad=0 * case.attitude.roll_rad)
     with pytest.raises(ValueError, match="/attitude: heading, pitch and roll never change"):
         diagnose(case.replace(attitude=flat))
+
+
+def test_diagnosis_on_the_sensor_samples_finds_a_beam_side_effect():
+    """With the beams' attitude from the samples (what real runs with turns get), a sound-speed
+    error is still named; effects on the motion model are skipped with the reason."""
+    case = simulate(with_effect(short_scenario(40.0), "sound_speed_error", {"relative_error": 0.03}), seed=2)
+    r = diagnose(case, DiagnosisConfig(effects=FEW, attitude="samples"))
+    assert r.base["attitude_source"] == "samples" and r.base["success"]
+    assert r.verdict == "sound_speed_error"
+    assert set(r.base["skipped_effects"]) == {"attitude_latency", "compass_deviation"}
+    assert not any(w["channel"] in ("heading", "pitch", "roll") for w in r.where)
+    assert r.statement.startswith("beams' attitude from the sensor's samples")
+    with pytest.raises(ValueError, match="attitude: expected one of"):
+        DiagnosisConfig(attitude="imu")

@@ -23,9 +23,10 @@ from scipy import stats
 
 from ...cases.case import Case
 from ...models.effects import CATALOG, get_effect
-from ...models.motion import AttitudeParams, evaluate_attitude
+from ...models.motion import AttitudeParams, evaluate_attitude, local_attitude_params
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
+from ..calibration import ATTITUDES, choose_attitude
 from . import where as where_mod
 from .model import GROUPS, Fit, GapModel, base_attitude, group_of, initial_noise, residual_peaks
 
@@ -51,11 +52,14 @@ class DiagnosisConfig:
     gap_z: float = 6.0
     min_gap: float = 0.1
     max_modes: int = 3
+    attitude: str = "auto"  # beams' attitude: model | samples | auto (as the calibration chooses)
     solver: SolverOptions = SolverOptions(tol=1e-6, max_iter=200, hessian="gauss-newton", expand=False, mu_init=1e-5)
 
     def __post_init__(self):
         for name in self.effects:
             get_effect(name)
+        if self.attitude not in ATTITUDES:
+            raise ValueError(f"attitude: expected one of {list(ATTITUDES)}, got {self.attitude!r}")
         if self.cv_folds < 2:
             raise ValueError(f"cv_folds: expected an integer >= 2, got {self.cv_folds}")
         if not self.cv_block_s > 0:
@@ -179,19 +183,24 @@ def _velocity_error(case: Case, model: GapModel, fit: Fit) -> float | None:
     return float(np.sqrt(np.mean(np.sum(err[ok] ** 2, axis=1)))) if ok.any() else None
 
 
-def _starting_nav(case: Case, att: AttitudeParams) -> np.ndarray:
+def _starting_nav(case: Case, att: AttitudeParams, sampled: bool = False) -> np.ndarray:
     ref = case.reference
     if ref is None or ref.time_s is None or ref.velocity_m_s is None:
         return np.zeros(4)
-    psi = evaluate_attitude(att, ref.time_s)["ypr"][:, 0]
+    if sampled:
+        psi = np.interp(ref.time_s, case.attitude.time_s, np.unwrap(case.attitude.heading_rad))
+    else:
+        psi = evaluate_attitude(att, ref.time_s)["ypr"][:, 0]
     v = np.nan_to_num(ref.velocity_m_s)
     fwd = v[:, 0] * np.cos(psi) + v[:, 1] * np.sin(psi)
     side = -v[:, 0] * np.sin(psi) + v[:, 1] * np.cos(psi)
     return np.array([np.median(fwd), np.median(side), 0.0, 0.0])
 
 
-def applicable(case: Case, name: str) -> tuple[bool, str]:
+def applicable(case: Case, name: str, sampled: bool = False) -> tuple[bool, str]:
     e = get_effect(name)
+    if sampled and e.acts_on_attitude_model:
+        return False, "acts on the motion model's attitude; the beams use the sensor's samples (no motion model follows them)"
     ref = case.reference
     moving = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
     if e.needs_reference and not moving:
@@ -208,13 +217,15 @@ def fit_base(case: Case, config: DiagnosisConfig, calibration: dict | None = Non
     if calibration and calibration.get("attitude_model"):
         att = base_attitude(dataclasses.replace(af, params=AttitudeParams.from_dict(calibration["attitude_model"])))
     sigma0 = initial_noise(case, af)
-    model = GapModel(case, att, solver=config.solver)
+    source, reason = choose_attitude(case, af, config.attitude)
+    model = GapModel(case, att, solver=config.solver, sampled=source == "samples")
+    model.attitude_reason = reason
     centre = np.zeros(3)
     if calibration and calibration.get("radius_vectors_m") is not None:
         r = np.array(calibration["radius_vectors_m"], dtype=float)  # null (undetermined) -> nan
         if np.all(np.isfinite(r)):
             centre = np.mean(r, axis=0) - np.mean(case.instrument.transducer_positions(), axis=0)
-    x0 = model.start(model.x_base(att, centre, _starting_nav(case, att)))
+    x0 = model.start(model.x_base(att, centre, _starting_nav(case, att, model.sampled)))
     fit = model.solve(x0, sigma0)
     # second pass with the groups' noise levels re-estimated where no independent one exists
     sigma = dict(sigma0)
@@ -238,12 +249,12 @@ def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibratio
     fits = {"base": (base_model, base)}
     skipped = {}
     for name in config.effects:
-        ok, why = applicable(case, name)
+        ok, why = applicable(case, name, base_model.sampled)
         if not ok:
             skipped[name] = why
             continue
         e = get_effect(name)
-        model = GapModel(case, att, [e], peaks, solver=config.solver)
+        model = GapModel(case, att, [e], peaks, solver=config.solver, sampled=base_model.sampled)
         starts = [model.start(base.x)] + [model.start(base.x, o) for o in e.extra_starts()]
         best = None
         for x0 in starts:
@@ -309,7 +320,12 @@ def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibratio
                          f"({where[0]['detail']}): an effect outside the catalog")
         else:
             statement = f"no significant gap: the base model fits to the noise (held-out excess chi2 {gap_before:.3f})"
+    if base_model.sampled:
+        statement = ("beams' attitude from the sensor's samples (" + base_model.attitude_reason + "): the motion model "
+                     "itself is the first gap; on the rest of the model: " + statement)
     base_info = {"success": base.success, "status": base.status, "iterations": base.iterations,
+                 "attitude_source": "samples" if base_model.sampled else "model",
+                 "attitude_source_reason": base_model.attitude_reason,
                  "log_likelihood": float(ll0), "n_observations": n_obs, "skipped_effects": skipped,
                  "unknowns": dict(zip(base.names[: base_model.n_base], map(float, base.x[: base_model.n_base])))}
     return DiagnosisResult(
@@ -323,8 +339,7 @@ def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibratio
 
 def _where(case: Case, model: GapModel, fit: Fit, cv_raw: np.ndarray, noise: dict, att: AttitudeParams) -> list:
     """Ranked channel reports of the base model's held-out residuals."""
-    n_att = att.layout.size
-    p = AttitudeParams.unpack(fit.x[:n_att], att.layout)
+    p = att if model.sampled else AttitudeParams.unpack(fit.x[:att.layout.size], att.layout)
     modes = [float(w) for w, _ in p.modes]
     reports = []
     for ch, sl in model.channel_slices().items():
@@ -332,14 +347,18 @@ def _where(case: Case, model: GapModel, fit: Fit, cv_raw: np.ndarray, noise: dic
         if m.sum() < 3:
             continue
         t = model.times[sl][m]
-        dt = 0.05
-        ypr = [evaluate_attitude(p, t + k * dt)["ypr"] for k in (-1, 0, 1)]
-        rate = (ypr[2] - ypr[0]) / (2 * dt)
-        accel = (ypr[2] - 2 * ypr[1] + ypr[0]) / dt**2
+        if model.sampled:  # the samples' interpolation and segment slopes (no accelerations)
+            local = local_attitude_params(case.attitude.time_s, case.attitude.ypr(), t)
+            now, rate, accel = local[1:4].T, local[4:7].T, None
+        else:
+            dt = 0.05
+            ypr = [evaluate_attitude(p, t + k * dt)["ypr"] for k in (-1, 0, 1)]
+            now, rate, accel = ypr[1], (ypr[2] - ypr[0]) / (2 * dt), (ypr[2] - 2 * ypr[1] + ypr[0]) / dt**2
         reg = {"roll rate": rate[:, 2], "pitch rate": rate[:, 1], "yaw rate": rate[:, 0],
-               "roll acceleration": accel[:, 2], "pitch acceleration": accel[:, 1],
-               "sin heading": np.sin(ypr[1][:, 0]), "cos heading": np.cos(ypr[1][:, 0]),
-               "roll": ypr[1][:, 2], "pitch": ypr[1][:, 1], "time": t}
+               "sin heading": np.sin(now[:, 0]), "cos heading": np.cos(now[:, 0]),
+               "roll": now[:, 2], "pitch": now[:, 1], "time": t}
+        if accel is not None:
+            reg.update({"roll acceleration": accel[:, 2], "pitch acceleration": accel[:, 1]})
         v = model.nav_at(fit.x, t)
         reg["speed"] = np.hypot(v[:, 0], v[:, 1])
         reg["depth"] = np.interp(t, case.pings.time_s, case.environment.depth_at_pings(case.pings.n))

@@ -5,6 +5,10 @@ attitude as freely decaying modes (decay >= ``MIN_FREE_DECAY_1_S``) with a yaw t
 lever arms r_i = T_it + P (installation angles zero), the shallow bottom-track model
 (Eq. 52), the instrument's sound speed and nominal beams, a still bottom, and the
 vessel moving at a constant speed along the heading trend plus a constant drift.
+When no motion model follows the sensor (real runs with turns, attitude sampled below the
+motion: ``sampled=True``) the beams use the sensor's samples interpolated linearly instead
+(:func:`adcpdyn.models.motion.local_attitude_function`), the attitude channels are data, not
+residuals, and the navigation follows the measured heading.
 Every effect adds its unknowns through the hooks of
 :class:`adcpdyn.models.effects.base.Effect`. Residuals are kept unweighted per
 channel; the objective weights them by per-group noise levels passed as parameters,
@@ -22,7 +26,8 @@ import numpy as np
 from ...cases.case import Case
 from ...models.janus import beam_to_instrument
 from ...models.measurement import bottom_track_function
-from ...models.motion import AttitudeLayout, AttitudeParams, attitude_function
+from ...models.motion import (AttitudeLayout, AttitudeParams, attitude_function, local_attitude_function,
+                              local_attitude_params)
 from ...models.rotations import euler_matrix
 from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import AttitudeFit, periodogram_peak
@@ -105,9 +110,13 @@ class GapModel:
     """Base model + effects as one NLP over scaled unknowns z = x / scale."""
 
     def __init__(self, case: Case, attitude: AttitudeParams, effects=(), peaks: dict | None = None,
-                 solver: SolverOptions | None = None):
+                 solver: SolverOptions | None = None, sampled: bool = False):
         self.case, self.effects = case, list(effects)
         self.attitude0 = attitude
+        self.sampled = sampled
+        for e in self.effects:
+            if sampled and e.acts_on_attitude_model:
+                raise ValueError(f"effect {e.name}: acts on the motion model's attitude; the beams use the sensor's samples here")
         layout = attitude.layout
         pings, N = case.pings, case.pings.n
         ref = case.reference
@@ -138,7 +147,7 @@ class GapModel:
             att_scale[s[f"{axis}_cs"]] = np.repeat(np.maximum(np.hypot(cs[:, 0], cs[:, 1]), 1e-3), 2)
         att_scale[s["roll_bias"]] = att_scale[s["pitch_bias"]] = 0.01
         att_scale[s["yaw_trend"]] = [1.0 if k == 0 else 0.01**k for k in range(layout.yaw_trend_order + 1)]
-        p_att = add(layout.names(), att_scale, att_lo, att_hi)
+        p_att = add([] if sampled else layout.names(), *([[]] * 3 if sampled else [att_scale, att_lo, att_hi]))
         box = 0.5 * case.vessel.length_m if case.vessel.length_m else 10.0
         centre = add(["centre_x_m", "centre_y_m", "centre_z_m"], [0.5] * 3, [-box] * 3, [box] * 3)
         nav = None
@@ -165,19 +174,28 @@ class GapModel:
             extra = e.extra_mode(t)
             if extra is not None:
                 p_full, lay_full = _append_mode(p_full, lay_full, *extra)
-        att_fun = attitude_function(lay_full)
+        att_fun = local_attitude_function() if sampled else attitude_function(lay_full)
         self.attitude_layout = lay_full
+        a = case.attitude
+        if sampled:  # per-row attitude data: the samples about each ping's / reference sample's time
+            p_rows = lambda times: ca.DM(local_attitude_params(a.time_s, a.ypr(), times))
+            heading_unwrapped = np.unwrap(a.ypr()[:, 0])
+        else:
+            p_rows = lambda times: p_full
 
         def hook(fn_name, value, *args):
             for e, t in zip(self.effects, th):
                 value = getattr(e, fn_name)(value, *args, t) if args else getattr(e, fn_name)(value, t)
             return value
 
-        trend = p_att[s["yaw_trend"]]
+        trend = None if sampled else p_att[s["yaw_trend"]]
 
         def heading_dirs(times):
-            tau = ca.DM(times - layout.t_ref_s)
-            psi = sum(trend[k] * tau**k for k in range(layout.yaw_trend_order + 1))
+            if sampled:
+                psi = ca.DM(np.interp(times, a.time_s, heading_unwrapped))
+            else:
+                tau = ca.DM(times - layout.t_ref_s)
+                psi = sum(trend[k] * tau**k for k in range(layout.yaw_trend_order + 1))
             return ca.horzcat(ca.cos(psi), ca.sin(psi), ca.DM.zeros(len(times))), ca.horzcat(-ca.sin(psi), ca.cos(psi), ca.DM.zeros(len(times)))
 
         def nav_velocity(times):
@@ -190,21 +208,22 @@ class GapModel:
         ctx.heading_dir_ping = heading_dirs(pings.time_s)[0]
         models, channels, times_of, self.groups = [], [], [], []
 
-        # attitude samples
-        a = case.attitude
-        M = a.time_s.size
-        t_att = hook("attitude_time", ca.DM(a.time_s).T)
-        ypr_model = att_fun.map(M)(t_att, p_full)[0]
-        p_tilt = hook("tilt_attitude_params", p_full, lay_full)
-        tilt_model = att_fun.map(M)(t_att, p_tilt)[0] if p_tilt is not p_full else ypr_model
-        psi = hook("heading_reading", ca.transpose(ypr_model[0, :]))
-        ypr_meas = a.ypr()
-        dpsi = psi - ypr_meas[:, 0]
-        models += [ca.atan2(ca.sin(dpsi), ca.cos(dpsi)), ca.transpose(tilt_model[1, :]) - ypr_meas[:, 1],
-                   ca.transpose(tilt_model[2, :]) - ypr_meas[:, 2]]
-        channels += [("heading", M), ("pitch", M), ("roll", M)]
-        times_of += [a.time_s] * 3
-        masks = [np.isfinite(ypr_meas[:, j]).astype(float) for j in range(3)]
+        # attitude samples (residuals of the motion model; data when the beams use the samples)
+        masks = []
+        if not sampled:
+            M = a.time_s.size
+            t_att = hook("attitude_time", ca.DM(a.time_s).T)
+            ypr_model = att_fun.map(M)(t_att, p_full)[0]
+            p_tilt = hook("tilt_attitude_params", p_full, lay_full)
+            tilt_model = att_fun.map(M)(t_att, p_tilt)[0] if p_tilt is not p_full else ypr_model
+            psi = hook("heading_reading", ca.transpose(ypr_model[0, :]))
+            ypr_meas = a.ypr()
+            dpsi = psi - ypr_meas[:, 0]
+            models += [ca.atan2(ca.sin(dpsi), ca.cos(dpsi)), ca.transpose(tilt_model[1, :]) - ypr_meas[:, 1],
+                       ca.transpose(tilt_model[2, :]) - ypr_meas[:, 2]]
+            channels += [("heading", M), ("pitch", M), ("roll", M)]
+            times_of += [a.time_s] * 3
+            masks += [np.isfinite(ypr_meas[:, j]).astype(float) for j in range(3)]
 
         # bottom track and ranges
         beam_dirs_t = hook("beam_directions", ca.DM(case.instrument.beam_directions()), case.instrument.beam_angle_rad)
@@ -222,7 +241,7 @@ class GapModel:
         bt_fun = bottom_track_function(att_fun, timing).map(N)
         v_in = ca.MX.sym("v_in", 3, N)
         radial, rng = bt_fun(ca.DM(pings.time_s).T, ca.DM(depth).T, g_depth, case.instrument.sound_speed_m_s,
-                             v_in, p_full, r, ypr_st, beam_dirs_t)
+                             v_in, p_rows(pings.time_s), r, ypr_st, beam_dirs_t)
         radial_scale = range_scale = 1.0
         for e, t in zip(self.effects, th):
             radial_scale, range_scale = radial_scale * e.radial_scale(t), range_scale * e.range_scale(t)
@@ -248,7 +267,7 @@ class GapModel:
         if self.moving_reference:
             L = ref.time_s.size
             ctx.heading_dir_reference = heading_dirs(ref.time_s)[0]
-            dLam = att_fun.map(L)(ca.DM(ref.time_s).T, p_full)[2]
+            dLam = att_fun.map(L)(ca.DM(ref.time_s).T, p_rows(ref.time_s))[2]
             p_ref = hook("reference_point", ca.DM(np.asarray(ref.point_body_m, dtype=float)))
             v_ref = hook("reference_velocity", nav_velocity(ref.time_s), ctx)
             ok = np.all(np.isfinite(ref.velocity_m_s), axis=1).astype(float)
@@ -287,7 +306,7 @@ class GapModel:
         return self.mask / np.array([sigma[GROUPS[g]] for g in self.group_index])
 
     def x_base(self, attitude: AttitudeParams, centre, nav) -> np.ndarray:
-        parts = [attitude.pack(), np.asarray(centre, dtype=float)]
+        parts = [np.zeros(0) if self.sampled else attitude.pack(), np.asarray(centre, dtype=float)]
         if not self.stationary:
             parts.append(np.asarray(nav, dtype=float))
         return np.concatenate(parts)
@@ -394,8 +413,9 @@ def residual_peaks(case: Case, fit_raw: np.ndarray, model: GapModel) -> dict:
     duration = t_ping[-1] - t_ping[0]
     lo, hi = max(4 * np.pi / duration, 0.2), 12.0
     out = {}
-    tilt = np.column_stack([fit_raw[sl["pitch"]], fit_raw[sl["roll"]]])
-    out["tilt"] = periodogram_peak(t_att, tilt, lo, hi)
+    if "pitch" in sl:  # attitude residuals exist only when the motion model is fitted
+        tilt = np.column_stack([fit_raw[sl["pitch"]], fit_raw[sl["roll"]]])
+        out["tilt"] = periodogram_peak(t_att, tilt, lo, hi)
     bt = np.column_stack([fit_raw[sl[f"bt_beam{i + 1}"]] for i in range(4)])
     out["bt_vertical"] = periodogram_peak(t_ping, bt.mean(axis=1), lo, hi)
     return out

@@ -39,6 +39,13 @@ class Effect:
 
     # ------------------------------------------------------------ parameters
     @property
+    def acts_on_attitude_model(self) -> bool:
+        """Whether the effect reshapes the fitted motion model (its time base, tilt, heading
+        reading or modes): meaningless when the beams use the sensor's samples."""
+        return any(getattr(type(self), h) is not getattr(Effect, h)
+                   for h in ("attitude_time", "tilt_attitude_params", "heading_reading", "extra_mode"))
+
+    @property
     def names(self) -> list[str]:
         return [p.name for p in self.parameters]
 
