@@ -142,6 +142,8 @@ def cmd_correct(args) -> int:
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
           f"mean horizontal speed {np.nanmean(np.hypot(v[:, 0], v[:, 1])):.4f} m/s, "
           f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
+    if result.attrs.get("installation_note"):
+        print(f"warning: {result.attrs['installation_note']}")
     return 0
 
 

@@ -17,6 +17,15 @@ def installation_from(calibration: dict) -> np.ndarray:
     return np.asarray(value, dtype=float)
 
 
+def assumed_installation(calibration: dict) -> np.ndarray:
+    """The nominal installation angles of the calibration's configuration (the mounting as set up)."""
+    value = (calibration.get("config") or {}).get("nominal_installation_ypr_rad")
+    if value is None or len(value) != 3 or any(v is None for v in value):
+        raise ValueError("calibration: installation_ypr_rad is not determined and config.nominal_installation_ypr_rad "
+                         "is missing; expected 3 angles in radians")
+    return np.asarray(value, dtype=float)
+
+
 def correct_case(case: Case, method: str, calibration: dict | None, timing: str = "deep"):
     """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
     sensor, its heading misalignment) or a dynamic method of
@@ -27,8 +36,17 @@ def correct_case(case: Case, method: str, calibration: dict | None, timing: str 
     if method not in CORRECTION_METHODS:
         raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
     if method == "asc":
-        ypr = None
+        ypr, note = None, None
         if calibration is not None and case.attitude.frame == "vessel":
-            ypr = installation_from(calibration)
-        return asc(with_heading_misalignment(case, calibration), ypr)
+            try:
+                ypr = installation_from(calibration)
+            except ValueError:
+                ypr = assumed_installation(calibration)
+                note = (f"installation angles not determined by the calibration: its nominal angles "
+                        f"{np.round(np.rad2deg(ypr), 3).tolist()} deg are used, as a static correction with the "
+                        "configured alignment would; the Earth velocities carry the unknown installation error")
+        result = asc(with_heading_misalignment(case, calibration), ypr)
+        if note:
+            result.attrs["installation_note"] = note
+        return result
     return dynamic_correction(case, method, calibration, timing=timing)

@@ -293,3 +293,17 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
     assert abs(a.objective - s.objective) <= 1e-6 * abs(s.objective)
     se = np.maximum(s.x_se, 1e-12)
     assert np.max(np.abs(a.x - s.x)[np.isfinite(se)] / se[np.isfinite(se)]) < 1e-2
+
+
+def test_static_correction_with_undetermined_installation_uses_the_nominal_angles_and_says_so():
+    from adcpdyn.estimators.asc import asc
+    from adcpdyn.estimators.correct_case import correct_case
+
+    sc = get_scenario("deep_ship")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=1)
+    calib = {"installation_ypr_rad": [None, None, None], "config": {"nominal_installation_ypr_rad": [0.1, 0.0, 0.0]}}
+    out = correct_case(case, "asc", calib)
+    assert "not determined" in out.attrs["installation_note"]
+    assert np.allclose(out.vessel_velocity_m_s, asc(case, np.array([0.1, 0.0, 0.0])).vessel_velocity_m_s, equal_nan=True)
+    with pytest.raises(ValueError, match="nominal_installation_ypr_rad is missing"):
+        correct_case(case, "asc", {"installation_ypr_rad": [None, None, None]})
