@@ -26,11 +26,11 @@ from .multistart import SolverOptions
 
 
 def variants(linear: dict, compiler: bool) -> dict:
-    """Named SolverOptions to compare with the default (``exact`` Hessian for this size)."""
+    """Named SolverOptions to compare with the default (Gauss-Newton Hessian for this size)."""
     base = SolverOptions()
-    out = {"default (exact, mumps, scaling, SX)": base,
+    out = {"default (auto: GN, mumps, SX)": base,
            "limited-memory Hessian": dataclasses.replace(base, hessian="limited-memory"),
-           "Gauss-Newton Hessian": dataclasses.replace(base, hessian="gauss-newton"),
+           "exact Hessian": dataclasses.replace(base, hessian="exact"),
            "no NLP scaling": dataclasses.replace(base, scaling=False),
            "warm-started multistart": dataclasses.replace(base, warm_start=True),
            "MX graph (no expand)": dataclasses.replace(base, expand=False)}
