@@ -31,7 +31,7 @@ from ..cases.case import Case
 from ..models.janus import beam_to_instrument
 from ..models.measurement import bottom_track_function
 from ..models.motion import (LOCAL_ATTITUDE_SIZE, AttitudeLayout, AttitudeParams, attitude_function,
-                             local_attitude_function, local_attitude_params)
+                             evaluate_attitude, local_attitude_function, local_attitude_params)
 from ..models.rotations import course_difference_rad, euler_matrix
 from ..models.sensors import reference_point_velocity
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
@@ -46,6 +46,7 @@ MIN_SAMPLES_PER_PERIOD = 4  # attitude samples per motion period below which no 
 # attitude pre-fit residual (heading, pitch, roll) above which the motion model does not follow the sensor:
 # several times a compass's / an inclinometer's noise (the paper's pool: 0.5 / 0.17 deg)
 MAX_MODEL_RESIDUAL_RAD = tuple(float(np.deg2rad(d)) for d in (2.0, 1.0, 1.0))
+MIN_RESIDUAL_LAG1 = 0.5  # |lag-1 autocorrelation| above which a residual is motion left unfollowed, not sensor noise
 METHODS = ("joint", "two-stage")
 TANGENTIALS = ("consistent", "paper_literal")
 DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
@@ -100,7 +101,9 @@ class CalibrationConfig:
         Attitude of the beams: ``model`` (the damped-mode model fitted jointly, the paper's
         method), ``samples`` (the sensor's samples interpolated linearly, fixed; for runs no
         motion model follows: attitude sampled below the motion, long records with turns) or
-        ``auto`` (samples when the pre-fit leaves residuals above ``MAX_MODEL_RESIDUAL_RAD``).
+        ``auto`` (samples when the pre-fit leaves residuals above ``MAX_MODEL_RESIDUAL_RAD``
+        that are coloured, |lag-1 autocorrelation| > ``MIN_RESIDUAL_LAG1``: motion the model
+        does not follow, not a noisy sensor).
         With samples, lever arms are reported only when the samples resolve the motion
         (at least ``MIN_SAMPLES_PER_PERIOD`` per period of the pre-fit's dominant mode).
     jacobian : str
@@ -298,14 +301,27 @@ def samples_per_period(case: Case, fit: AttitudeFit) -> float:
     return dominant_period_s(fit) / float(np.median(np.diff(case.attitude.time_s)))
 
 
+def attitude_residual_lag1(case: Case, fit: AttitudeFit) -> np.ndarray:
+    """Lag-1 autocorrelation of the pre-fit's heading, pitch and roll residuals (0 for white noise)."""
+    a = case.attitude
+    r = a.ypr() - evaluate_attitude(fit.params, a.time_s)["ypr"]
+    r[:, 0] = np.angle(np.exp(1j * r[:, 0]))
+    r = r - np.nanmean(r, axis=0)
+    power = np.nansum(r * r, axis=0)
+    return np.where(power > 0, np.nansum(r[1:] * r[:-1], axis=0) / np.where(power > 0, power, 1.0), 0.0)
+
+
 def choose_attitude(case: Case, fit: AttitudeFit, requested: str = "auto") -> tuple[str, str]:
     """``model`` or ``samples`` for the beams' attitude, and why."""
     if requested != "auto":
         return requested, "requested"
     excess = np.asarray(fit.sigmas) > np.asarray(MAX_MODEL_RESIDUAL_RAD)
     if excess.any():
+        excess &= np.abs(attitude_residual_lag1(case, fit)) > MIN_RESIDUAL_LAG1
+    if excess.any():
         left = ", ".join(f"{n} {np.rad2deg(v):.2f} deg" for n, v, e in zip(("heading", "pitch", "roll"), fit.sigmas, excess) if e)
-        return "samples", f"the damped-mode model leaves {left} of residual: turns or irregular motion it cannot follow"
+        return "samples", (f"the damped-mode model leaves {left} of coloured residual: turns or irregular motion it "
+                           "cannot follow")
     return "model", "the damped-mode model follows the attitude samples"
 
 

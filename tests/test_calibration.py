@@ -146,6 +146,23 @@ def test_beams_attitude_from_samples_on_a_run_the_model_follows():
     assert auto.attitude_source == "model" and not auto.sampled
 
 
+def test_a_noisy_compass_keeps_the_motion_model_turns_do_not():
+    """3-deg compass noise (white) leaves the model in place; the same run with its heading
+    readings turned by a slow 20-deg swing (motion the model cannot follow) takes the samples."""
+    from adcpdyn.estimators.attitude_fit import fit_attitude
+    from adcpdyn.estimators.calibration import choose_attitude
+
+    sc = get_scenario("pool_m0")
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, noise=dataclasses.replace(sc.run.noise, heading_rad=np.deg2rad(3.0))))
+    case = simulate(sc, seed=1)
+    assert choose_attitude(case, fit_attitude(case))[0] == "model"
+    t = case.attitude.time_s
+    swing = np.deg2rad(20.0) * np.sin(2 * np.pi * (t - t[0]) / (t[-1] - t[0]) * 1.5)
+    turned = dataclasses.replace(case, attitude=dataclasses.replace(case.attitude, heading_rad=case.attitude.heading_rad + swing))
+    source, reason = choose_attitude(turned, fit_attitude(turned))
+    assert source == "samples" and "coloured residual" in reason
+
+
 def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
     sc = get_scenario("deep_ship")  # pitch 0.35 deg, roll -0.25 deg: outside a 0.1-degree box
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0, water_depth_m=12.0))
