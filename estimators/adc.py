@@ -32,7 +32,7 @@ import numpy as np
 from ..cases.case import Case
 from ..models.doppler import ratio_from_radial
 from ..models.janus import beam_to_instrument
-from ..models.motion import AttitudeParams, evaluate_attitude
+from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 from ..models.rotations import euler_matrix
 from .asc import Correction
 from .attitude_fit import fit_attitude
@@ -236,9 +236,14 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
         case = with_heading_misalignment(case, calibration)
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
+        if attitude is None and calibration.get("attitude_source") == "samples":  # as the calibration's beams
+            attitude = SampledAttitude(case.attitude.time_s, case.attitude.ypr())
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"
     if method in ("rootfinder", "oracle"):
+        if isinstance(attitude, SampledAttitude):
+            raise ValueError("calibration: attitude_source 'samples': the exact per-ping solve needs a motion model "
+                             "(the sensor's samples are supported by --method adc and paper_literal)")
         V, err, n_good, info = _rootfind(case, attitude, lever, ypr_st, timing, rootfinder_options)
     else:
         geo = _geometry(case, attitude, lever, ypr_st, tangential, timing)

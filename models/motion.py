@@ -275,6 +275,18 @@ def local_attitude_params(time_s, ypr_rad, times) -> np.ndarray:
     return np.vstack([times, at.T, slope.T])
 
 
+@dataclass(frozen=True)
+class SampledAttitude:
+    """The sensor's samples as the attitude (linear interpolation, :func:`local_attitude_function`):
+    what the corrections use where no motion model follows the run."""
+
+    time_s: np.ndarray
+    ypr_rad: np.ndarray
+
+    def params_at(self, times) -> np.ndarray:
+        return local_attitude_params(self.time_s, self.ypr_rad, times)
+
+
 def _attitude_from_ypr(t, p, ypr) -> ca.Function:
     Lam = euler_matrix(ypr[0], ypr[1], ypr[2])
     dLam = ca.reshape(ca.jacobian(ca.vec(Lam), t), 3, 3)
@@ -302,21 +314,32 @@ def _mapped_attitude(layout: AttitudeLayout, n: int) -> ca.Function:
     return attitude_function(layout).map(n)
 
 
-def evaluate_attitude(params: AttitudeParams, times) -> dict[str, np.ndarray]:
+@functools.lru_cache(maxsize=8)
+def _mapped_local_attitude(n: int) -> ca.Function:
+    return local_attitude_function().map(n)
+
+
+def evaluate_attitude(params: AttitudeParams | SampledAttitude, times) -> dict[str, np.ndarray]:
     """Numeric attitude at many times: ypr (n,3), Lambda, dLambda_dt, Omega (n,3,3), omega (n,3).
 
+    ``params``: a motion model, or the sensor's samples (:class:`SampledAttitude`).
     Evaluated in chunks through one cached mapped Function per layout (building a map
     over n costs O(n), so it is built once per chunk size, not per call).
     """
     times = np.asarray(times, dtype=float).reshape(-1)
     n = times.size
-    p = params.pack()
+    sampled = isinstance(params, SampledAttitude)
+    p = None if sampled else params.pack()
     parts = []
     for start in range(0, n, EVAL_CHUNK):
         chunk = times[start:start + EVAL_CHUNK]
         size = EVAL_CHUNK if n > EVAL_CHUNK else n
         padded = np.pad(chunk, (0, size - chunk.size), mode="edge")
-        parts.append([o.full() for o in _mapped_attitude(params.layout, size)(padded[None, :], p)])
+        if sampled:
+            out = _mapped_local_attitude(size)(padded[None, :], params.params_at(padded))
+        else:
+            out = _mapped_attitude(params.layout, size)(padded[None, :], p)
+        parts.append([o.full() for o in out])
     cat = lambda k, rows: np.concatenate([part[k] for part in parts], axis=1)[:, : n * rows]
     out = [cat(0, 1), cat(1, 3), cat(2, 3), cat(3, 3), cat(4, 1)]
     return {
