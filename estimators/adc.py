@@ -40,14 +40,19 @@ from .attitude_fit import fit_attitude
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
 
 
-def _beam_state(attitude: AttitudeParams, times: np.ndarray, Lst, B, r, tangential: str):
+def _beam_state(attitude: AttitudeParams, times: np.ndarray, Lst, B, r, tangential: str, ping_time_s=None):
     """Beam directions d (..., 3), tangential velocities (..., 3) and Lambda at ``times``.
 
     ``times`` is (N, 1) (one time per ping, all beams), (N, 4) or (N, 4, K): beams along
     axis 1. Directions d_i = Lambda Lambda_st b_i (Eqs. 26-29), tangential velocity
-    dLambda/dt r_i (Eq. 24), or Omega r_i when ``tangential="paper_literal"``.
+    dLambda/dt r_i (Eq. 24), or Omega r_i when ``tangential="paper_literal"``. With the
+    sensor's samples as attitude, each ping's sample segment at ``ping_time_s`` (N,) is
+    extended to its receive times, as in the calibration's measurement model.
     """
-    flat = evaluate_attitude(attitude, times.reshape(-1))
+    anchor = None
+    if ping_time_s is not None:
+        anchor = np.broadcast_to(np.reshape(ping_time_s, (-1,) + (1,) * (times.ndim - 1)), times.shape).reshape(-1)
+    flat = evaluate_attitude(attitude, times.reshape(-1), anchor)
     Lam = flat["Lambda"].reshape(times.shape + (3, 3))
     tang = flat["dLambda_dt" if tangential == "consistent" else "Omega"].reshape(times.shape + (3, 3))
     shape = (1, 4) + (1,) * (times.ndim - 2) + (3, 1)
@@ -80,7 +85,7 @@ def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangen
     v_meas = case.pings.bt_radial_m_s[rows]
     l = (depth - _transducer_depths(case, Lam_T, r)) / d_T[..., 2] * (1 - np.nan_to_num(v_meas) / c)  # Eq. 67
     t_R = t[:, None] + (np.zeros_like(l) if timing == "shallow" else 2 * l / c)  # Eq. 68; "shallow": no flight
-    d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential)
+    d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential, t)
     u_R = np.sum(w_R * d_R, axis=-1)
     rho = ratio_from_radial(v_meas, c)
     A = d_R + rho[..., None] * d_T
@@ -108,7 +113,7 @@ def _water(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, vessel_ve
     u_T = np.sum((w_T + vessel_velocity[:, None, :]) * d_T, axis=-1)  # (N, 4)
     l = (cells[None, None, :] - _transducer_depths(case, Lam_T, r)[..., None]) / d_T[..., 2][..., None]  # Eq. 86
     t_R = t[:, None, None] + (np.zeros_like(l) if timing == "shallow" else 2 * l / c)  # Eq. 87
-    d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential)  # (N, 4, K, 3)
+    d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential, t)  # (N, 4, K, 3)
     u_R = np.sum((w_R + vessel_velocity[:, None, None, :]) * d_R, axis=-1)  # (N, 4, K)
     rho = ratio_from_radial(case.water.radial_m_s, c)  # (N, 4, K)
     uT = u_T[..., None]
@@ -156,9 +161,12 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
         _, e_row = beam_to_instrument(B)
         r = np.asarray(lever_arms_s, dtype=float)
         depth = case.environment.depth_at_pings(N)[full]
+        sampled = isinstance(attitude, SampledAttitude)
+        t_full = case.pings.time_s[full]
         V[full], err[full], res, info["rootfinder_fallback_pings"] = solve_bottom_track(
-            attitude.layout, attitude.pack(), r, ypr_st, _g_depth(case, r), case.pings.time_s[full], depth, bt[full],
-            case.instrument.sound_speed_m_s, B, error_direction(e_row), timing, options)
+            None if sampled else attitude.layout, np.zeros(0) if sampled else attitude.pack(), r, ypr_st,
+            _g_depth(case, r), t_full, depth, bt[full], case.instrument.sound_speed_m_s, B, error_direction(e_row),
+            timing, options, ping_attitude=attitude.params_at(t_full) if sampled else None)
         info["rootfinder_unconverged_pings"] = int(np.sum(~(res <= NEWTON_RESIDUAL_TOL)))
     three = np.flatnonzero(n_good == 3)
     if three.size:
@@ -241,9 +249,6 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"
     if method in ("rootfinder", "oracle"):
-        if isinstance(attitude, SampledAttitude):
-            raise ValueError("calibration: attitude_source 'samples': the exact per-ping solve needs a motion model "
-                             "(the sensor's samples are supported by --method adc and paper_literal)")
         V, err, n_good, info = _rootfind(case, attitude, lever, ypr_st, timing, rootfinder_options)
     else:
         geo = _geometry(case, attitude, lever, ypr_st, tangential, timing)

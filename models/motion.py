@@ -319,14 +319,18 @@ def _mapped_local_attitude(n: int) -> ca.Function:
     return local_attitude_function().map(n)
 
 
-def evaluate_attitude(params: AttitudeParams | SampledAttitude, times) -> dict[str, np.ndarray]:
+def evaluate_attitude(params: AttitudeParams | SampledAttitude, times, anchor_s=None) -> dict[str, np.ndarray]:
     """Numeric attitude at many times: ypr (n,3), Lambda, dLambda_dt, Omega (n,3,3), omega (n,3).
 
-    ``params``: a motion model, or the sensor's samples (:class:`SampledAttitude`).
+    ``params``: a motion model, or the sensor's samples (:class:`SampledAttitude`); with
+    samples, ``anchor_s`` (same shape as ``times``) is the time whose sample segment is
+    extended to each time (a ping's transmit time for its receive times, as the
+    calibration's measurement model does), default the time itself.
     Evaluated in chunks through one cached mapped Function per layout (building a map
     over n costs O(n), so it is built once per chunk size, not per call).
     """
     times = np.asarray(times, dtype=float).reshape(-1)
+    anchors = times if anchor_s is None else np.broadcast_to(np.asarray(anchor_s, dtype=float), times.shape).reshape(-1)
     n = times.size
     sampled = isinstance(params, SampledAttitude)
     p = None if sampled else params.pack()
@@ -336,7 +340,8 @@ def evaluate_attitude(params: AttitudeParams | SampledAttitude, times) -> dict[s
         size = EVAL_CHUNK if n > EVAL_CHUNK else n
         padded = np.pad(chunk, (0, size - chunk.size), mode="edge")
         if sampled:
-            out = _mapped_local_attitude(size)(padded[None, :], params.params_at(padded))
+            anchor = np.pad(anchors[start:start + EVAL_CHUNK], (0, size - chunk.size), mode="edge")
+            out = _mapped_local_attitude(size)(padded[None, :], params.params_at(anchor))
         else:
             out = _mapped_attitude(params.layout, size)(padded[None, :], p)
         parts.append([o.full() for o in out])

@@ -32,7 +32,7 @@ import casadi as ca
 import numpy as np
 
 from ..models.measurement import bottom_track_function
-from ..models.motion import AttitudeLayout, attitude_function
+from ..models.motion import LOCAL_ATTITUDE_SIZE, AttitudeLayout, attitude_function, local_attitude_function
 
 NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it go to casadi.rootfinder
 CHUNK = 16384  # pings per mapped call (the map is built once per chunk size)
@@ -78,14 +78,20 @@ class RootfinderOptions:
 class _Model:
     """What fixes the per-ping equations besides the shared parameter vector (hashable)."""
 
-    layout: AttitudeLayout
+    layout: AttitudeLayout | None  # None: the sensor's samples, per-ping attitude data in q
     timing: str
     sound_speed_m_s: float
     beam_dirs_t: tuple
     error_direction: tuple
 
+    def n_attitude(self) -> int:
+        return 0 if self.layout is None else self.layout.size
+
+    def ping_inputs(self) -> int:
+        return N_PING_INPUTS + (LOCAL_ATTITUDE_SIZE if self.layout is None else 0)
+
     def shared_size(self) -> int:
-        return self.layout.size + 12 + 3 + 1  # attitude parameters, r (4x3), Lambda_st angles, depth of G
+        return self.n_attitude() + 12 + 3 + 1  # attitude parameters, r (4x3), Lambda_st angles, depth of G
 
 
 def shared_parameters(attitude_p: np.ndarray, lever_arms_m: np.ndarray, ypr_st_rad, g_depth_m: float) -> np.ndarray:
@@ -96,14 +102,18 @@ def shared_parameters(attitude_p: np.ndarray, lever_arms_m: np.ndarray, ypr_st_r
 
 @functools.lru_cache(maxsize=16)
 def _residual(model: _Model) -> ca.Function:
-    """``g(x (4), q (6), s) -> residual (4)`` in m/s: the measurement model minus the measured radials."""
-    bt = bottom_track_function(attitude_function(model.layout), model.timing)
+    """``g(x (4), q, s) -> residual (4)`` in m/s: the measurement model minus the measured radials.
+
+    q = [t_T, bottom depth, four radials] (+ the ping's sampled attitude when ``model.layout`` is None)."""
+    sampled = model.layout is None
+    bt = bottom_track_function(local_attitude_function() if sampled else attitude_function(model.layout), model.timing)
     x = ca.SX.sym("x", 4)
-    q = ca.SX.sym("q", N_PING_INPUTS)
+    q = ca.SX.sym("q", model.ping_inputs())
     s = ca.SX.sym("s", model.shared_size())
-    n_att = model.layout.size
+    n_att = model.n_attitude()
     r = ca.reshape(s[n_att:n_att + 12], 3, 4).T  # row-major (4, 3)
-    radial, _ = bt(q[0], q[1], s[-1], model.sound_speed_m_s, x[:3], s[:n_att], r, s[n_att + 12:n_att + 15],
+    p_att = q[N_PING_INPUTS:] if sampled else s[:n_att]
+    radial, _ = bt(q[0], q[1], s[-1], model.sound_speed_m_s, x[:3], p_att, r, s[n_att + 12:n_att + 15],
                    ca.DM(np.reshape(model.beam_dirs_t, (4, 3))))
     g = radial + x[3] * ca.DM(model.error_direction) - q[2:6]
     return ca.Function("bottom_track_residual", [x, q, s], [g], ["x", "q", "s"], ["g"])
@@ -114,7 +124,7 @@ def _newton(model: _Model, steps: int, compiled: bool) -> ca.Function:
     """``solve(q (6), s) -> (x (4), |residual|_inf)``: the chord iteration unrolled into one SX expression."""
     g = _residual(model)
     x = ca.SX.sym("x", 4)
-    q = ca.SX.sym("q", N_PING_INPUTS)
+    q = ca.SX.sym("q", model.ping_inputs())
     s = ca.SX.sym("s", model.shared_size())
     gj = ca.Function("residual_and_jacobian", [x, q, s], [g(x, q, s), ca.jacobian(g(x, q, s), x)])
     g0, j0 = gj(ca.SX.zeros(4), q, s)
@@ -143,13 +153,15 @@ def _fallback(model: _Model, n: int) -> ca.Function:
     return rf.map(n)
 
 
-def solve_bottom_track(layout: AttitudeLayout, attitude_p, lever_arms_m, ypr_st_rad, g_depth_m: float,
+def solve_bottom_track(layout: AttitudeLayout | None, attitude_p, lever_arms_m, ypr_st_rad, g_depth_m: float,
                        time_s, depth_m, radial_m_s, sound_speed_m_s: float, beam_dirs_t, error_direction,
-                       timing: str = "deep", options: RootfinderOptions | None = None):
+                       timing: str = "deep", options: RootfinderOptions | None = None, ping_attitude=None):
     """Vessel velocity (N, 3), error velocity (N,), final residual (N,) and how many pings went to
     ``casadi.rootfinder``, for pings with four beams.
 
-    ``attitude_p`` packs the attitude model of the sensor frame, ``lever_arms_m`` (4, 3)
+    ``attitude_p`` packs the attitude model of the sensor frame (``layout`` None: the sensor's
+    samples instead, ``ping_attitude`` (7, N) from :meth:`~adcpdyn.models.motion.SampledAttitude.params_at`
+    at the ping times, ``attitude_p`` empty), ``lever_arms_m`` (4, 3)
     are in that frame and ``ypr_st_rad`` turns the transducer frame into it; ``g_depth_m``
     is the depth of the centre of rotation. Pings whose residual stays above
     ``NEWTON_RESIDUAL_TOL`` after ``casadi.rootfinder`` get NaN (their residual says why).
@@ -158,7 +170,7 @@ def solve_bottom_track(layout: AttitudeLayout, attitude_p, lever_arms_m, ypr_st_
     model = _Model(layout, timing, float(sound_speed_m_s), tuple(np.asarray(beam_dirs_t, dtype=float).ravel()),
                    tuple(np.asarray(error_direction, dtype=float).ravel()))
     q = np.vstack([np.asarray(time_s, dtype=float), np.asarray(depth_m, dtype=float),
-                   np.asarray(radial_m_s, dtype=float).T])
+                   np.asarray(radial_m_s, dtype=float).T] + ([] if layout is not None else [np.asarray(ping_attitude, dtype=float)]))
     s = shared_parameters(np.asarray(attitude_p, dtype=float), lever_arms_m, ypr_st_rad, g_depth_m)
     n = q.shape[1]
     size = min(n, CHUNK)
