@@ -1,9 +1,10 @@
-"""Gauss-Newton Lagrangian Hessian for IPOPT as a CasADi callback.
+"""Gauss-Newton Lagrangian Hessian for IPOPT from an assembled residual Jacobian, as a callback.
 
-For f = 0.5 |e(x, p)|^2 the Gauss-Newton Hessian is sigma J^T J. Forming J^T J
-symbolically costs far more than the solve on long runs (every entry is a sum over
-all residuals), so the callback evaluates the sparse residual Jacobian J numerically
-and forms triu(J^T J) with scipy's sparse product. Constraint curvature is left out.
+For f = 0.5 |e(x, p)|^2 the Gauss-Newton Hessian is sigma J^T J (constraint curvature
+left out). When J is a CasADi Function, :func:`~adcpdyn.solvers.multistart.build_solver`
+forms it as a CasADi graph; an assembled Jacobian
+(:class:`~adcpdyn.estimators.row_jacobian.RowJacobian`: scipy, per-row blocks chained
+numerically) needs this callback, which forms triu(J^T J) with numpy/scipy products.
 """
 
 from __future__ import annotations
@@ -14,23 +15,18 @@ import scipy.sparse as sp
 
 
 class GaussNewtonHessian(ca.Callback):
-    """``nlp_hess_l(x, p, lam_f, lam_g) -> sigma * triu(J^T J)`` from a Jacobian Function."""
+    """``nlp_hess_l(x, p, lam_f, lam_g) -> sigma * triu(J^T J)`` from an assembled Jacobian."""
 
     def __init__(self, jacobian, n_g: int, name: str = "nlp_hess_l"):
-        """``jacobian``: a CasADi Function (x, p) -> J, or a callable (x, p) -> scipy sparse J
-        with attributes ``sparsity`` (its structural pattern, scipy) and ``n_z``, ``n_p``."""
+        """``jacobian``: a callable (x, p) -> scipy sparse J with attributes ``sparsity`` (its
+        structural pattern, scipy) and ``n_z``, ``n_p``."""
         ca.Callback.__init__(self)
         self._jac = jacobian
         self._n_g = n_g
-        if isinstance(jacobian, ca.Function):
-            self._n_x, self._n_p = jacobian.size1_in(0), jacobian.size1_in(1)
-            ones = ca.DM(jacobian.sparsity_out(0), 1.0)
-            self._hess_sp = ca.triu(ca.mtimes(ones.T, ones)).sparsity()
-        else:
-            self._n_x, self._n_p = jacobian.n_z, jacobian.n_p
-            P = jacobian.sparsity.astype(float)
-            H = sp.triu(P.T @ P).tocoo()
-            self._hess_sp = ca.Sparsity.triplet(self._n_x, self._n_x, H.row.tolist(), H.col.tolist())
+        self._n_x, self._n_p = jacobian.n_z, jacobian.n_p
+        P = jacobian.sparsity.astype(float)
+        H = sp.triu(P.T @ P).tocoo()
+        self._hess_sp = ca.Sparsity.triplet(self._n_x, self._n_x, H.row.tolist(), H.col.tolist())
         rows, cols = self._hess_sp.get_triplet()
         self._rows, self._cols = np.asarray(rows), np.asarray(cols)
         self.construct(name, {})
@@ -55,10 +51,7 @@ class GaussNewtonHessian(ca.Callback):
         return self._hess_sp
 
     def eval(self, arg):
-        if isinstance(self._jac, ca.Function):
-            J = self._jac(arg[0], arg[1]).sparse()
-        else:
-            J = self._jac(arg[0].full().ravel(), arg[1].full().ravel())
+        J = self._jac(arg[0].full().ravel(), arg[1].full().ravel())
         if J.nnz > 0.05 * J.shape[0] * J.shape[1]:  # dense enough for BLAS to beat the sparse product
             Jd = J.toarray()
             values = (Jd.T @ Jd)[self._rows, self._cols]

@@ -188,7 +188,7 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
             opts["hess_lag"] = ca.Function("nlp_hess_l", [X, P, lam_f, ca.MX.sym("lam_g", nlp["g"].shape[0])],
                                            [lam_f * ca.triu(ca.mtimes(J.T, J))],
                                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-        else:  # assembled per-row Jacobian (scipy): a callback
+        else:  # assembled per-row Jacobian (scipy): the callback
             hess = GaussNewtonHessian(jac, nlp["g"].shape[0])
             opts["hess_lag"] = hess
             _KEEP_ALIVE.append(hess)  # the callback must outlive the solver
