@@ -30,8 +30,8 @@ from scipy.stats import qmc
 from ..cases.case import Case
 from ..models.janus import beam_to_instrument
 from ..models.measurement import bottom_track_function
-from ..models.motion import (LOCAL_ATTITUDE_SIZE, AttitudeLayout, AttitudeParams, attitude_function,
-                             evaluate_attitude, local_attitude_function, local_attitude_params)
+from ..models.motion import (LOCAL_ATTITUDE_SIZE, AttitudeLayout, AttitudeParams, SampledAttitude,
+                             attitude_function, evaluate_attitude, local_attitude_function)
 from ..models.rotations import course_difference_rad, euler_matrix
 from ..models.sensors import reference_point_velocity
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
@@ -374,8 +374,7 @@ class CalibrationProblem:
             ub.extend(hi)
 
         if self.sampled:  # the samples about each row's time: data, one column per row
-            a = case.attitude
-            self.local_attitude = lambda times: local_attitude_params(a.time_s, a.ypr(), times)
+            self.samples = SampledAttitude(case.attitude.time_s, case.attitude.ypr())
             p_att = ca.MX(0, 1)
         elif self.two_stage:  # stage 1 is done: the attitude model is frozen
             p_att = ca.MX(ca.DM(self.fit.params.pack()))
@@ -457,7 +456,7 @@ class CalibrationProblem:
         bt_fun = self.bottom_track.map(N)
         depth = case.environment.depth_at_pings(N)
         g_depth = case.environment.transducer_depth_m - ca.sum1(self.lever.r[:, 2]) / 4
-        p_pings = ca.DM(self.local_attitude(pings.time_s)) if self.sampled else p_att
+        p_pings = ca.DM(self.samples.params_at(pings.time_s)) if self.sampled else p_att
         radial, rng = bt_fun(ca.DM(pings.time_s).T, ca.DM(depth).T, g_depth, case.instrument.sound_speed_m_s,
                              v_ping.T, p_pings, self.lever.r, ypr_beams, ca.DM(self.beam_dirs_t))
         bt = pings.bt_radial_m_s
@@ -474,7 +473,7 @@ class CalibrationProblem:
         self.use_reference = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
         if self.use_reference:
             L = ref.time_s.size
-            p_refs = ca.DM(self.local_attitude(ref.time_s)) if self.sampled else p_att
+            p_refs = ca.DM(self.samples.params_at(ref.time_s)) if self.sampled else p_att
             _, _, dLam, _, _ = att_fun.map(L)(ca.DM(ref.time_s).T, p_refs)
             p_ref = np.asarray(ref.point_body_m, dtype=float)
             if self.head_sensor:  # dLambda p = dLambda_h Lambda_tb^T p with the nominal Lambda_tb
@@ -536,7 +535,7 @@ class CalibrationProblem:
         v, s = ca.SX.sym("v", 3), ca.SX.sym("s", n_s)
         p_att, r = s[:n_att], ca.reshape(s[n_att:n_att + 12], 3, 4).T
         p_row1, p_row2 = (d1[1:], d2[2:]) if self.sampled else (p_att, p_att)
-        local = (lambda t: self.local_attitude(t)) if self.sampled else (lambda t: np.zeros((0, np.size(t))))
+        local = self.samples.params_at if self.sampled else (lambda t: np.zeros((0, np.size(t))))
         ypr_beams, g_depth = s[n_att + 12:n_att + 15], s[n_att + 15]
         knots_basis = lambda t: None if self.knots is None else sp.csr_matrix(_hat_basis(t, self.knots))
         blocks, offset = [], 0

@@ -286,6 +286,10 @@ class SampledAttitude:
     def params_at(self, times) -> np.ndarray:
         return local_attitude_params(self.time_s, self.ypr_rad, times)
 
+    def heading_at(self, times) -> np.ndarray:
+        """Heading (rad, unwrapped) interpolated linearly, held at the end values outside the samples."""
+        return np.interp(times, self.time_s, np.unwrap(self.ypr_rad[:, 0]))
+
 
 def _attitude_from_ypr(t, p, ypr) -> ca.Function:
     Lam = euler_matrix(ypr[0], ypr[1], ypr[2])

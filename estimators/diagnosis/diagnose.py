@@ -23,7 +23,7 @@ from scipy import stats
 
 from ...cases.case import Case
 from ...models.effects import CATALOG, get_effect
-from ...models.motion import AttitudeParams, evaluate_attitude, local_attitude_params
+from ...models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration import ATTITUDES, choose_attitude
@@ -183,14 +183,11 @@ def _velocity_error(case: Case, model: GapModel, fit: Fit) -> float | None:
     return float(np.sqrt(np.mean(np.sum(err[ok] ** 2, axis=1)))) if ok.any() else None
 
 
-def _starting_nav(case: Case, att: AttitudeParams, sampled: bool = False) -> np.ndarray:
+def _starting_nav(case: Case, att: AttitudeParams | SampledAttitude) -> np.ndarray:
     ref = case.reference
     if ref is None or ref.time_s is None or ref.velocity_m_s is None:
         return np.zeros(4)
-    if sampled:
-        psi = np.interp(ref.time_s, case.attitude.time_s, np.unwrap(case.attitude.heading_rad))
-    else:
-        psi = evaluate_attitude(att, ref.time_s)["ypr"][:, 0]
+    psi = att.heading_at(ref.time_s) if isinstance(att, SampledAttitude) else evaluate_attitude(att, ref.time_s)["ypr"][:, 0]
     v = np.nan_to_num(ref.velocity_m_s)
     fwd = v[:, 0] * np.cos(psi) + v[:, 1] * np.sin(psi)
     side = -v[:, 0] * np.sin(psi) + v[:, 1] * np.cos(psi)
@@ -225,7 +222,7 @@ def fit_base(case: Case, config: DiagnosisConfig, calibration: dict | None = Non
         r = np.array(calibration["radius_vectors_m"], dtype=float)  # null (undetermined) -> nan
         if np.all(np.isfinite(r)):
             centre = np.mean(r, axis=0) - np.mean(case.instrument.transducer_positions(), axis=0)
-    x0 = model.start(model.x_base(att, centre, _starting_nav(case, att, model.sampled)))
+    x0 = model.start(model.x_base(att, centre, _starting_nav(case, model.samples if model.sampled else att)))
     fit = model.solve(x0, sigma0)
     # second pass with the groups' noise levels re-estimated where no independent one exists
     sigma = dict(sigma0)
@@ -348,7 +345,7 @@ def _where(case: Case, model: GapModel, fit: Fit, cv_raw: np.ndarray, noise: dic
             continue
         t = model.times[sl][m]
         if model.sampled:  # the samples' interpolation and segment slopes (no accelerations)
-            local = local_attitude_params(case.attitude.time_s, case.attitude.ypr(), t)
+            local = model.samples.params_at(t)
             now, rate, accel = local[1:4].T, local[4:7].T, None
         else:
             dt = 0.05

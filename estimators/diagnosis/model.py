@@ -26,8 +26,8 @@ import numpy as np
 from ...cases.case import Case
 from ...models.janus import beam_to_instrument
 from ...models.measurement import bottom_track_function
-from ...models.motion import (AttitudeLayout, AttitudeParams, attitude_function, local_attitude_function,
-                              local_attitude_params)
+from ...models.motion import (AttitudeLayout, AttitudeParams, SampledAttitude, attitude_function,
+                              local_attitude_function)
 from ...models.rotations import euler_matrix
 from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import AttitudeFit, periodogram_peak
@@ -177,11 +177,9 @@ class GapModel:
         att_fun = local_attitude_function() if sampled else attitude_function(lay_full)
         self.attitude_layout = lay_full
         a = case.attitude
-        if sampled:  # per-row attitude data: the samples about each ping's / reference sample's time
-            p_rows = lambda times: ca.DM(local_attitude_params(a.time_s, a.ypr(), times))
-            heading_unwrapped = np.unwrap(a.ypr()[:, 0])
-        else:
-            p_rows = lambda times: p_full
+        # per-row attitude data with the samples: their segment about each ping's / reference sample's time
+        self.samples = SampledAttitude(a.time_s, a.ypr()) if sampled else None
+        p_rows = (lambda times: ca.DM(self.samples.params_at(times))) if sampled else (lambda times: p_full)
 
         def hook(fn_name, value, *args):
             for e, t in zip(self.effects, th):
@@ -192,7 +190,7 @@ class GapModel:
 
         def heading_dirs(times):
             if sampled:
-                psi = ca.DM(np.interp(times, a.time_s, heading_unwrapped))
+                psi = ca.DM(self.samples.heading_at(times))
             else:
                 tau = ca.DM(times - layout.t_ref_s)
                 psi = sum(trend[k] * tau**k for k in range(layout.yaw_trend_order + 1))
