@@ -74,6 +74,14 @@ def _series_function(n_modes: int, n_axes: int, n_samples: int, t_ref: float) ->
     return ca.Function("series", [tt, qq], [ca.vec(yy.T), J])
 
 
+def autocorrelation(x, lags: int) -> np.ndarray:
+    """Autocorrelation of a residual series (mean removed) at lags 1..``lags``; 0 for a constant one."""
+    x = np.asarray(x, dtype=float)
+    x = x - x.mean()
+    d = float(np.dot(x, x)) or 1.0
+    return np.array([np.dot(x[:-k], x[k:]) / d for k in range(1, lags + 1)])
+
+
 def periodogram_peak(t, x, lo, hi, n_candidates=5) -> float:
     """Circular frequency of the highest Lomb-Scargle peak in [lo, hi] (columns of x summed).
 

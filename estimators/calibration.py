@@ -35,7 +35,7 @@ from ..models.motion import (LOCAL_ATTITUDE_SIZE, AttitudeLayout, AttitudeParams
 from ..models.rotations import course_difference_rad, euler_matrix
 from ..models.sensors import reference_point_velocity
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
-from .attitude_fit import AttitudeFit, fit_attitude
+from .attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from .formulations import AXES, FORMULATIONS, lever_block
 from .row_jacobian import RowBlock, RowJacobian
 from .uncertainty import Uncertainty, uncertainty
@@ -306,9 +306,7 @@ def attitude_residual_lag1(case: Case, fit: AttitudeFit) -> np.ndarray:
     a = case.attitude
     r = a.ypr() - evaluate_attitude(fit.params, a.time_s)["ypr"]
     r[:, 0] = np.angle(np.exp(1j * r[:, 0]))
-    r = r - np.nanmean(r, axis=0)
-    power = np.nansum(r * r, axis=0)
-    return np.where(power > 0, np.nansum(r[1:] * r[:-1], axis=0) / np.where(power > 0, power, 1.0), 0.0)
+    return np.array([autocorrelation(r[:, j], 1)[0] for j in range(3)])
 
 
 def choose_attitude(case: Case, fit: AttitudeFit, requested: str = "auto") -> tuple[str, str]:

@@ -14,14 +14,10 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal, stats
 
+from ..attitude_fit import autocorrelation
+
 N_WINDOWS = 6
 LB_LAGS = 10
-
-
-def _acf(x: np.ndarray, lags: int) -> np.ndarray:
-    x = x - x.mean()
-    d = float(np.dot(x, x)) or 1.0
-    return np.array([np.dot(x[:-k], x[k:]) / d for k in range(1, lags + 1)])
 
 
 def _peak(t: np.ndarray, x: np.ndarray, lo: float, hi: float):
@@ -47,7 +43,7 @@ def channel_report(name: str, t: np.ndarray, r: np.ndarray, sigma: float, regres
     order = np.argsort(t)
     t, r, z = t[order], r[order], z[order]
     lags = min(LB_LAGS, n // 4)
-    rho = _acf(r, lags)
+    rho = autocorrelation(r, lags)
     q = n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, lags + 1)))
     out["lag1_autocorrelation"] = float(rho[0])
     out["ljung_box_p"] = float(stats.chi2.sf(q, lags))
