@@ -195,7 +195,7 @@ def _calibration_config(args, formulation=None):
 
     return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
-                             jacobian=getattr(args, "jacobian", "auto"), attitude=getattr(args, "attitude", "auto"))
+                             jacobian=args.jacobian, attitude=args.attitude)
 
 
 def cmd_calibrate(args) -> int:
