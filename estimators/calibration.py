@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import warnings
 from dataclasses import asdict, dataclass, field
 
@@ -442,6 +443,13 @@ class CalibrationProblem:
         # attitude samples (stage 1 of the two-stage method has used them already)
         a = case.attitude
         M = a.time_s.size
+        self.bottom_track = bottom_track_function(att_fun, self.timing, config.tangential)  # one ping
+        self.use_reference = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
+        n_nodes = (self.bottom_track.n_instructions() * N
+                   + att_fun.n_instructions() * ((0 if self.frozen_attitude else M) + (ref.time_s.size if self.use_reference else 0)))
+        self.assembled = config.jacobian == "assembled" or (config.jacobian == "auto" and n_nodes > ASSEMBLED_MIN_NODES)
+        # long runs: the cores the multistart's workers leave free share the per-row Jacobians
+        self.threads = max(1, (os.cpu_count() or 1) // max(1, min(config.workers, config.n_starts))) if self.assembled else 1
         if not self.frozen_attitude:
             ypr_model, *_ = att_fun.map(M)(ca.DM(a.time_s).T, p_att)
             ypr_meas = a.ypr()
@@ -450,7 +458,6 @@ class CalibrationProblem:
                        ca.transpose(ypr_model[2, :]) - ypr_meas[:, 2]]
             self.channels += [("heading", M), ("pitch", M), ("roll", M)]
         # bottom track and ranges
-        self.bottom_track = bottom_track_function(att_fun, self.timing, config.tangential)  # one ping
         bt_fun = self.bottom_track.map(N)
         depth = case.environment.depth_at_pings(N)
         g_depth = case.environment.transducer_depth_m - ca.sum1(self.lever.r[:, 2]) / 4
@@ -468,7 +475,6 @@ class CalibrationProblem:
                 models.append(ca.transpose(rng[i, :]) - np.nan_to_num(pings.bt_range_m[:, i]))
                 self.channels.append((f"range_beam{i + 1}", N))
         # reference velocity of a body point
-        self.use_reference = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
         if self.use_reference:
             L = ref.time_s.size
             p_refs = ca.DM(self.samples.params_at(ref.time_s)) if self.sampled else p_att
@@ -487,9 +493,6 @@ class CalibrationProblem:
                 self.channels.append((f"reference_{AXES[j]}", L))
         raw = ca.vertcat(*models)
         self.masks = self._masks()
-        n_nodes = (self.bottom_track.n_instructions() * N
-                   + att_fun.n_instructions() * ((0 if self.frozen_attitude else M) + (ref.time_s.size if self.use_reference else 0)))
-        self.assembled = config.jacobian == "assembled" or (config.jacobian == "auto" and n_nodes > ASSEMBLED_MIN_NODES)
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
         weights = ca.MX.sym("w", raw.shape[0])
         e = weights * raw
@@ -566,7 +569,7 @@ class CalibrationProblem:
         if self.knots is not None:
             k = len(self.knots)
             knot_cols = (len(self.names) - 3 * k + np.arange(3 * k)).reshape(k, 3)
-        return RowJacobian(z, shared_z, blocks, n_rows, knot_cols, self.scale)
+        return RowJacobian(z, shared_z, blocks, n_rows, knot_cols, self.scale, threads=self.threads)
 
     # ------------------------------------------------------------------ helpers
     def _attitude_bounds(self, params: AttitudeParams):

@@ -13,6 +13,7 @@ matrix as ``casadi.jacobian`` of the stacked residuals, in O(rows) time and memo
 from __future__ import annotations
 
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import casadi as ca
@@ -41,11 +42,13 @@ class RowJacobian:
     """``J(z, w) = diag(w) d residuals / dz`` as a scipy CSR matrix.
 
     ``shared`` is the MX expression s(z); ``knot_columns`` (K, 3) the columns of z holding
-    the knot velocities and ``knot_scale`` their scale (x = scale z).
+    the knot velocities and ``knot_scale`` their scale (x = scale z). ``threads``: each
+    block's rows are split into this many contiguous chunks evaluated at once (CasADi
+    releases Python's lock while it evaluates).
     """
 
     def __init__(self, z: ca.MX, shared: ca.MX, blocks: list[RowBlock], n_rows: int,
-                 knot_columns: np.ndarray | None = None, knot_scale: np.ndarray | None = None):
+                 knot_columns: np.ndarray | None = None, knot_scale: np.ndarray | None = None, threads: int = 1):
         self.n_rows, self.n_z = n_rows, z.shape[0]
         self.n_p = n_rows  # the NLP's parameters are the residual weights, one per row
         self._shared = ca.Function("shared", [z], [shared, ca.jacobian(shared, z)])
@@ -54,13 +57,19 @@ class RowJacobian:
         self.blocks = blocks
         self.knot_columns = knot_columns
         self.knot_scale = knot_scale
-        self._jac = []
+        self._jac, self._chunks = [], []
         for b in blocks:
             d, v, s = (ca.SX.sym(n, b.fun.sparsity_in(i)) for i, n in enumerate(("d", "v", "s")))
             y = b.fun(d, v, s)
             f = ca.Function("row_jacobian", [d, v, s], [ca.densify(ca.jacobian(y, v)), ca.densify(ca.jacobian(y, s))])
-            self._jac.append(f.map("row_jacobians", "serial", b.data.shape[1], [2], []))  # s shared, not repeated
+            n = b.data.shape[1]
+            edges = np.linspace(0, n, max(1, min(threads, n)) + 1).astype(int)
+            chunks = list(zip(edges[:-1], edges[1:]))
+            maps = {m: f.map("row_jacobians", "serial", m, [2], []) for m in {hi - lo for lo, hi in chunks}}  # s shared
+            self._jac.append([maps[hi - lo] for lo, hi in chunks])
+            self._chunks.append(chunks)
         self._data = [np.ascontiguousarray(b.data.T) for b in blocks]  # (n, n_d): CasADi's column-major (n_d, n)
+        self._pool = ThreadPoolExecutor(threads) if threads > 1 else None
         self._local = threading.local()  # evaluation buffers are per thread (multistart solves in threads)
         self.sparsity = self._pattern()
 
@@ -70,19 +79,27 @@ class RowJacobian:
         if buffers is None:
             buffers = self._local.buffers = [None] * len(self._jac)
         if buffers[i] is None:
-            f, b = self._jac[i], self.blocks[i]
-            k, n = b.fun.size1_out(0), b.data.shape[1]
-            buf, run = f.buffer()
-            out = (np.empty((n, 3, k)), np.empty((n, f.size1_in(2), k)))
-            buf.set_arg(0, memoryview(self._data[i]))
-            buf.set_res(0, memoryview(out[0]))
-            buf.set_res(1, memoryview(out[1]))
-            buffers[i] = (buf, run, out)
-        buf, run, out = buffers[i]
-        v, s = np.ascontiguousarray(v), np.ascontiguousarray(s)
-        buf.set_arg(1, memoryview(v))
-        buf.set_arg(2, memoryview(s))
-        run()
+            b = self.blocks[i]
+            k, n, ns = b.fun.size1_out(0), b.data.shape[1], self._jac[i][0].size1_in(2)
+            out = (np.empty((n, 3, k)), np.empty((n, ns, k)))
+            parts = []
+            for f, (lo, hi) in zip(self._jac[i], self._chunks[i]):
+                buf, run = f.buffer()
+                buf.set_arg(0, memoryview(self._data[i][lo:hi]))
+                buf.set_res(0, memoryview(out[0][lo:hi]))
+                buf.set_res(1, memoryview(out[1][lo:hi]))
+                parts.append((buf, run))
+            buffers[i] = (parts, out, np.empty((n, 3)), np.empty(ns))
+        parts, out, v_in, s_in = buffers[i]
+        v_in[...], s_in[...] = v, s  # the buffers hold pointers: inputs live as long as they do
+        for (buf, _), (lo, hi) in zip(parts, self._chunks[i]):
+            buf.set_arg(1, memoryview(v_in[lo:hi]))
+            buf.set_arg(2, memoryview(s_in))
+        if self._pool is None:
+            for _, run in parts:
+                run()
+        else:
+            list(self._pool.map(lambda part: part[1](), parts))
         return out
 
     def _pattern(self) -> sp.csr_matrix:
@@ -102,33 +119,64 @@ class RowJacobian:
         rows, cols = np.concatenate(rows), np.concatenate(cols)
         return sp.csr_matrix((np.ones(rows.size, dtype=bool), (rows, cols)), shape=(self.n_rows, self.n_z))
 
-    def __call__(self, z, w) -> sp.csr_matrix:
+    def _parts(self, z, w):
+        """Per block: its rows r (k n,), the weighted shared-column part (k n, n_shared_cols)
+        dense, and the weighted knot part (k n, n_z) sparse (None without knots)."""
+        w = np.asarray(w, dtype=float).ravel()
         s, ds_dz = self._shared(z)
         s = s.full().ravel()
         ds_dz = ds_dz.full()[:, self._shared_cols]  # (ns, n_shared_cols)
-        rows, cols, vals = [], [], []
         for index, b in enumerate(self.blocks):
             k, n = b.fun.size1_out(0), b.data.shape[1]
             v = np.zeros((n, 3))  # (n, 3): CasADi's column-major (3, n)
-            if b.velocity_basis is not None and self.knot_columns is not None:
+            knotted = b.velocity_basis is not None and self.knot_columns is not None
+            if knotted:
                 knots = np.asarray(z, dtype=float).ravel()[self.knot_columns] * self.knot_scale[self.knot_columns]
                 v = b.velocity_basis @ knots
             jv, js = self._evaluate(index, v, s)
             sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
-            js = js.transpose(2, 0, 1) * sign[:, None, None]  # (k, n, ns)
-            dense = js @ ds_dz  # (k, n, n_shared_cols)
             r = b.offset + np.arange(k * n)
-            rows.append(np.repeat(r, self._shared_cols.size))
-            cols.append(np.tile(self._shared_cols, r.size))
-            vals.append(dense.reshape(-1))
-            if b.velocity_basis is not None and self.knot_columns is not None:
+            wr = w[r]
+            shared = ((js.transpose(2, 0, 1) * sign[:, None, None]) @ ds_dz).reshape(k * n, -1) * wr[:, None]
+            knot_part = None
+            if knotted:
                 jv = jv.transpose(2, 0, 1) * sign[:, None, None]  # (k, n, 3)
                 H = b.velocity_basis.tocoo()
+                rows, cols, vals = [], [], []
                 for i in range(k):
                     for a in range(3):
-                        rows.append(b.offset + i * n + H.row)
-                        cols.append(self.knot_columns[H.col, a])
-                        vals.append(jv[i, H.row, a] * H.data * self.knot_scale[self.knot_columns[H.col, a]])
-        J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(self.n_rows, self.n_z))
-        return sp.diags(np.asarray(w, dtype=float).ravel()) @ J
+                        c = self.knot_columns[H.col, a]
+                        rows.append(i * n + H.row)
+                        cols.append(c)
+                        vals.append(jv[i, H.row, a] * H.data * self.knot_scale[c] * wr[i * n + H.row])
+                knot_part = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                          shape=(k * n, self.n_z))
+            yield r, shared, knot_part
+
+    def __call__(self, z, w) -> sp.csr_matrix:
+        rows, cols, vals = [], [], []
+        for r, shared, knot_part in self._parts(z, w):
+            rows.append(np.repeat(r, self._shared_cols.size))
+            cols.append(np.tile(self._shared_cols, r.size))
+            vals.append(shared.reshape(-1))
+            if knot_part is not None:
+                kp = knot_part.tocoo()
+                rows.append(r[kp.row])
+                cols.append(kp.col)
+                vals.append(kp.data)
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                             shape=(self.n_rows, self.n_z))
+
+    def gram(self, z, w) -> np.ndarray:
+        """J^T J (n_z, n_z) dense, block by block, without forming J: the shared columns'
+        part by a dense product, the knots' by sparse ones (knot and shared columns are disjoint)."""
+        G = np.zeros((self.n_z, self.n_z))
+        sc = self._shared_cols
+        for _, shared, knot_part in self._parts(z, w):
+            G[np.ix_(sc, sc)] += shared.T @ shared
+            if knot_part is not None:
+                cross = knot_part.T @ shared  # (n_z, n_shared_cols), zero on the shared rows
+                G[:, sc] += cross
+                G[sc, :] += cross.T
+                G += (knot_part.T @ knot_part).toarray()
+        return G

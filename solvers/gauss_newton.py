@@ -13,13 +13,16 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+DENSE_GRAM_MAX_UNKNOWNS = 3000  # up to here J^T J is formed dense from the Jacobian's blocks
+
 
 class GaussNewtonHessian(ca.Callback):
     """``nlp_hess_l(x, p, lam_f, lam_g) -> sigma * triu(J^T J)`` from an assembled Jacobian."""
 
     def __init__(self, jacobian, n_g: int, name: str = "nlp_hess_l"):
         """``jacobian``: a callable (x, p) -> scipy sparse J with attributes ``sparsity`` (its
-        structural pattern, scipy) and ``n_z``, ``n_p``."""
+        structural pattern, scipy) and ``n_z``, ``n_p``; if it has ``gram(x, p)`` (dense J^T J)
+        that is used instead of forming J."""
         ca.Callback.__init__(self)
         self._jac = jacobian
         self._n_g = n_g
@@ -51,6 +54,9 @@ class GaussNewtonHessian(ca.Callback):
         return self._hess_sp
 
     def eval(self, arg):
+        if hasattr(self._jac, "gram") and self._n_x <= DENSE_GRAM_MAX_UNKNOWNS:  # J^T J without forming J
+            G = self._jac.gram(arg[0].full().ravel(), arg[1].full().ravel())
+            return [ca.DM(self._hess_sp, G[self._rows, self._cols] * float(arg[2]))]
         J = self._jac(arg[0].full().ravel(), arg[1].full().ravel())
         if J.nnz > 0.05 * J.shape[0] * J.shape[1]:  # dense enough for BLAS to beat the sparse product
             Jd = J.toarray()

@@ -263,12 +263,16 @@ def test_qiao_baseline_finds_installation_yaw():
 
 @pytest.mark.parametrize("kind", ["head_sensor_still", "vessel_sensor_moving_deep", "head_sensor_moving",
                                   "head_sensor_moving_samples"])
-def test_assembled_jacobian_equals_casadi_jacobian(kind):
+def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     """The per-row assembled residual Jacobian (long runs) against casadi.jacobian of the whole
     expanded problem, on each layout of unknowns: still head sensor, vessel sensor with
     velocity knots, GNSS and the deep-water model, head sensor with heading misalignment, and the
-    latter with the beams' attitude from the sensor's samples (per-row attitude data)."""
+    latter with the beams' attitude from the sensor's samples (per-row attitude data). Three
+    cores and one worker: the assembled problem's per-row Jacobians are split over three threads."""
+    from adcpdyn.estimators import calibration
     from adcpdyn.estimators.calibration import CalibrationProblem
+
+    monkeypatch.setattr(calibration.os, "cpu_count", lambda: 3)
 
     if kind == "head_sensor_still":
         sc = get_scenario("pool_m0")
@@ -282,8 +286,9 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind):
                                  run=dataclasses.replace(sc.run, duration_s=30.0))
     case = simulate(sc, seed=2)
     attitude = "samples" if kind == "head_sensor_moving_samples" else "model"
-    problems = {j: CalibrationProblem(case, CalibrationConfig(n_starts=2, seed=1, jacobian=j, attitude=attitude))
+    problems = {j: CalibrationProblem(case, CalibrationConfig(n_starts=2, seed=1, jacobian=j, attitude=attitude, workers=1))
                 for j in ("assembled", "symbolic")}
+    assert problems["assembled"].threads == 3 and problems["symbolic"].threads == 1
     if kind == "vessel_sensor_moving_deep":
         assert problems["symbolic"].timing == "deep" and problems["symbolic"].knots is not None
     if kind.startswith("head_sensor_moving"):
@@ -292,7 +297,11 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind):
     w = problems["symbolic"].weights()
     assembled = problems["assembled"].jacobian_fun(z, w)
     symbolic = np.asarray(problems["symbolic"].jacobian_fun(z, w))
+    residuals = [np.asarray(problems[j].residual_fun(z, w)[0]).ravel() for j in ("assembled", "symbolic")]
+    assert np.max(np.abs(residuals[0] - residuals[1])) < 1e-12 * np.max(np.abs(residuals[1]))
     assert np.max(np.abs(assembled.toarray() - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
+    gram = symbolic.T @ symbolic  # the Gauss-Newton Hessian's J^T J, formed block by block without J
+    assert np.max(np.abs(problems["assembled"].jacobian_fun.gram(z, w) - gram)) < 1e-9 * np.max(np.abs(gram))
     assert np.all((symbolic != 0) <= problems["assembled"].jacobian_fun.sparsity.toarray())
 
 
