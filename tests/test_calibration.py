@@ -333,3 +333,17 @@ def test_static_correction_with_undetermined_installation_uses_the_nominal_angle
     assert np.allclose(out.vessel_velocity_m_s, asc(case, np.array([0.1, 0.0, 0.0])).vessel_velocity_m_s, equal_nan=True)
     with pytest.raises(ValueError, match="nominal_installation_ypr_rad is missing"):
         correct_case(case, "asc", {"installation_ypr_rad": [None, None, None]})
+
+
+def test_periodogram_finds_a_short_lived_mode_in_a_long_record():
+    """A pitch mode that decays within seconds, at the start of a 2000-s record sampled at
+    5 Hz: thinning the record for Lomb-Scargle keeps only a few samples of it, so a densely
+    sampled long record takes its candidates from the FFT of the whole record. The peak is
+    as wide as the decay rate: found within it."""
+    from adcpdyn.estimators.attitude_fit import periodogram_peak
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.19, 0.21, size=10000))
+    omega, decay = 4.29, 0.30
+    x = 0.012 * np.exp(-decay * (t - t[0])) * np.cos(omega * (t - t[0]) + 0.4) + 2e-4 * rng.standard_normal(t.size)
+    assert abs(periodogram_peak(t, x, 0.2, 16.0) - omega) < decay
