@@ -269,7 +269,7 @@ def _suite(suite: str, quick: bool):
         return bench_solvers(starts=8, jit=not quick), print_solvers, figure_solvers
     from .bench_scale import bench_scale, figure_scale, print_scale
 
-    sizes = [100, 300, 1000, 3000] if quick else [100, 300, 1000, 3000, 10**4, 3 * 10**4, 10**5]
+    sizes = [100, 300, 1000, 3000, 10**4] if quick else [100, 300, 1000, 3000, 10**4, 3 * 10**4, 10**5]
     return bench_scale(sizes, time_limit_s=120.0 if quick else 900.0), print_scale, figure_scale
 
 
