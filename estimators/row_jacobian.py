@@ -21,6 +21,16 @@ import numpy as np
 import scipy.sparse as sp
 
 
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """One pool per thread count for the process (problems come and go, threads stay few)."""
+    if threads not in _POOLS:
+        _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="row-jacobian")
+    return _POOLS[threads]
+
+
 @dataclass
 class RowBlock:
     """Residual rows ``offset + i * n + j`` (output i of row j) of one mapped per-row model.
@@ -69,7 +79,7 @@ class RowJacobian:
             self._jac.append([maps[hi - lo] for lo, hi in chunks])
             self._chunks.append(chunks)
         self._data = [np.ascontiguousarray(b.data.T) for b in blocks]  # (n, n_d): CasADi's column-major (n_d, n)
-        self._pool = ThreadPoolExecutor(threads) if threads > 1 else None
+        self._pool = _pool(threads) if threads > 1 else None
         self._local = threading.local()  # evaluation buffers are per thread (multistart solves in threads)
         self.sparsity = self._pattern()
 

@@ -54,7 +54,8 @@ def bench_scale(sizes, seed: int = 1, time_limit_s: float = 600.0, memory_limit_
     res = {"suite": "scale", "machine": machine(), "scenario": SCENARIO, "ping_interval_s": list(PING_INTERVAL_S),
            "seed": seed, "sizes_requested": list(sizes), "time_limit_s": time_limit_s,
            "memory_limit_mb": memory_limit_mb, "rows": rows, "skipped": skipped,
-           "calibration": f"one start, one thread, {HESSIAN} Hessian, default CalibrationConfig otherwise"}
+           "calibration": f"one start (its per-row Jacobians on the free cores), {HESSIAN} Hessian, "
+                          "default CalibrationConfig otherwise"}
     if len(rows) >= 2:
         n = [r["n_pings"] for r in rows]
         keys = ("calibration_s", "setup_s", "solve_s", "peak_rss_mb")
