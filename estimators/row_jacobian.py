@@ -49,7 +49,8 @@ class RowBlock:
 
 
 class RowJacobian:
-    """``J(z, w) = diag(w) d residuals / dz`` as a scipy CSR matrix.
+    """``J(z, w) = diag(w) d residuals / dz`` as a scipy CSR matrix, and ``gram(z, w)`` its
+    J^T J formed block by block (the Gauss-Newton Hessian, without assembling J).
 
     ``shared`` is the MX expression s(z); ``knot_columns`` (K, 3) the columns of z holding
     the knot velocities and ``knot_scale`` their scale (x = scale z). ``threads``: each
