@@ -3,7 +3,8 @@
 With J the Jacobian of the noise-weighted residuals and A that of the equality
 constraints (both in scaled variables z), the information in the feasible tangent
 space is F = Z^T J^T J Z with Z spanning null(A). Directions where F is
-(numerically) singular, or where the standard error exceeds ``UNDETERMINED_SE``
+(numerically) singular, judged on F with unit diagonal so that one near-exact channel
+does not set the threshold, or where the standard error exceeds ``UNDETERMINED_SE``
 times the variable's scale, are reported as unobservable, in words and as vectors;
 quantities that depend on them get an infinite standard error instead of a number.
 """
@@ -13,10 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import null_space
+from scipy.linalg import null_space, orth
 
 RANK_RTOL = 1e-10
-UNDETERMINED_SE = 1e3  # in units of the variable scales
+UNDETERMINED_SE = 1e2  # in units of the variable scales
 WEAK_SE = 0.1  # a direction known no better than a tenth of its scale is "weakly determined"
 LEAK_RTOL = 0.01  # a quantity depends on an undetermined direction when its gradient leaks >1% into it
 AXIS_WORDS = {"vessel": {0: "x_b (bow / roll axis)", 1: "y_b (starboard / pitch axis)", 2: "z_b (down / yaw axis)"},
@@ -89,12 +90,25 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
     n = J.shape[1]
     Z = null_space(A) if A is not None and A.size else np.eye(n)
     F = Z.T @ (J.T @ J) @ Z
-    lam, V = np.linalg.eigh(F)
-    lam_max = max(lam.max(initial=0.0), 1e-300)
-    bad = (lam <= RANK_RTOL * lam_max) | (lam <= 1.0 / UNDETERMINED_SE**2)
+    # Numerical rank on the Jacobi-equilibrated F (unit diagonal): one near-exact channel (a
+    # noise-free heading, information ~1e14) must not push ordinary directions below a
+    # threshold relative to the largest eigenvalue.
+    d = np.sqrt(np.diag(F))
+    D = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 1.0)
+    lam_eq, V_eq = np.linalg.eigh(D[:, None] * F * D[None, :])
+    singular = lam_eq <= RANK_RTOL * max(lam_eq.max(initial=0.0), 1e-300)
+    # In the rest, eigen-directions in z (unit length) and the absolute test: SE beyond
+    # UNDETERMINED_SE scales is no estimate.
+    null_singular = orth(D[:, None] * V_eq[:, singular]) if singular.any() else np.zeros((F.shape[0], 0))
+    if null_singular.shape[1] > 1:  # within the null space, F's own directions (named one by one below)
+        null_singular = null_singular @ np.linalg.eigh(null_singular.T @ F @ null_singular)[1]
+    Q = null_space(null_singular.T) if singular.any() else np.eye(F.shape[0])  # the rest: F's range
+    lam, W = np.linalg.eigh(Q.T @ F @ Q)
+    V = Q @ W
+    bad = lam <= 1.0 / UNDETERMINED_SE**2
     good = ~bad
     cov_z = (Z @ V[:, good]) @ np.diag(1.0 / lam[good]) @ (Z @ V[:, good]).T
-    null_z = (Z @ V[:, bad]).T
+    null_z = np.vstack([(Z @ null_singular).T, (Z @ V[:, bad]).T])
     se = np.sqrt(np.maximum(np.diag(cov_z), 0.0))
     if null_z.size:
         leak = np.abs(null_z).max(axis=0) > LEAK_RTOL

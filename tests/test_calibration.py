@@ -347,3 +347,20 @@ def test_periodogram_finds_a_short_lived_mode_in_a_long_record():
     omega, decay = 4.29, 0.30
     x = 0.012 * np.exp(-decay * (t - t[0])) * np.cos(omega * (t - t[0]) + 0.4) + 2e-4 * rng.standard_normal(t.size)
     assert abs(periodogram_peak(t, x, 0.2, 16.0) - omega) < decay
+
+
+def test_uncertainty_rank_is_not_set_by_one_near_exact_channel():
+    """One unknown known to 1e-7 (a noise-free heading: information 1e14) beside one known to 1
+    and one the data do not touch: the second keeps its standard error 1 (a threshold relative
+    to the largest eigenvalue would call it unobservable), the third is named unobservable.
+    Closed form: J diagonal, so the covariance is diag(1 / J_ii^2)."""
+    from adcpdyn.estimators.uncertainty import uncertainty
+
+    J = np.array([[1e7, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [3e6, 0.0, 0.0]])
+    u = uncertainty(J, None, ["heading_bias", "P_x", "P_y"], np.ones(3))
+    assert np.allclose(u.se_z[:2], [1 / np.hypot(1e7, 3e6), 1.0], rtol=1e-9)
+    assert u.se_z[2] == np.inf and len(u.null_directions_z) == 1
+    assert abs(u.null_directions_z[0, 2]) == pytest.approx(1.0)
+    # with an equality constraint z0 = z1, the feasible direction (1, 1, 0) / sqrt 2 carries both
+    c = uncertainty(J, np.array([[1.0, -1.0, 0.0]]), ["heading_bias", "P_x", "P_y"], np.ones(3))
+    assert c.se_z[0] == pytest.approx(1 / np.sqrt(1e14 + 9e12 + 1.0), rel=1e-9)
