@@ -324,6 +324,17 @@ def choose_attitude(case: Case, fit: AttitudeFit, requested: str = "auto") -> tu
     return "model", "the damped-mode model follows the attitude samples"
 
 
+def reference_velocity_function(point_sensor_m, heading_misaligned: bool) -> ca.Function:
+    """``(v_a (3), dLambda/dt (3x3), d) -> velocity`` the reference measures: its body point's
+    (p in the sensor frame), turned by the heading misalignment d into the true Earth frame
+    when the sensor's Earth is off (head sensor against GNSS)."""
+    v, dLam, d = ca.SX.sym("v_a", 3), ca.SX.sym("dLambda", 3, 3), ca.SX.sym("d")
+    velocity = reference_point_velocity(v, dLam, ca.DM(point_sensor_m))
+    if heading_misaligned:
+        velocity = ca.mtimes(euler_matrix(d, 0, 0), velocity)
+    return ca.Function("reference_velocity", [v, dLam, d], [velocity])
+
+
 def bt_noise_from_error_velocity(case: Case) -> float:
     """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
     B = case.instrument.beam_directions()
@@ -482,14 +493,12 @@ class CalibrationProblem:
             p_ref = np.asarray(ref.point_body_m, dtype=float)
             if self.head_sensor:  # dLambda p = dLambda_h Lambda_tb^T p with the nominal Lambda_tb
                 p_ref = np.asarray(euler_matrix(*config.nominal_installation_ypr_rad)).T @ p_ref
-            self.reference_point_sensor = p_ref
+            self.reference_velocity = reference_velocity_function(p_ref, self.head_yaw)  # one reference sample
             v_ref_model = ca.mtimes(ca.DM(_hat_basis(ref.time_s, self.knots)), V) if V is not None else ca.MX(L, 3)
-            v_sensor = [v_ref_model[:, j] + ca.mtimes(ca.reshape(dLam[j, :], 3, L).T, ca.DM(p_ref)) for j in range(3)]
-            if heading_offset is not None:  # the reference lives in the true Earth frame
-                cos_d, sin_d = ca.cos(heading_offset), ca.sin(heading_offset)
-                v_sensor[:2] = [cos_d * v_sensor[0] - sin_d * v_sensor[1], sin_d * v_sensor[0] + cos_d * v_sensor[1]]
+            v_sensor = self.reference_velocity.map(L)(v_ref_model.T, dLam,
+                                                      heading_offset if heading_offset is not None else 0)
             for j in range(3):
-                models.append(v_sensor[j] - np.nan_to_num(ref.velocity_m_s[:, j]))
+                models.append(ca.transpose(v_sensor[j, :]) - np.nan_to_num(ref.velocity_m_s[:, j]))
                 self.channels.append((f"reference_{AXES[j]}", L))
         raw = ca.vertcat(*models)
         self.masks = self._masks()
@@ -556,10 +565,7 @@ class CalibrationProblem:
         offset += out.shape[0] * pings.n
         if self.use_reference:
             ref = case.reference
-            vs = reference_point_velocity(v, att_fun(d1[0], p_row1)[2], ca.DM(self.reference_point_sensor))
-            if self.head_yaw:
-                d = s[n_s - 1]
-                vs = ca.vertcat(ca.cos(d) * vs[0] - ca.sin(d) * vs[1], ca.sin(d) * vs[0] + ca.cos(d) * vs[1], vs[2])
+            vs = self.reference_velocity(v, att_fun(d1[0], p_row1)[2], s[n_s - 1] if self.head_yaw else 0)
             blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), np.vstack([ref.time_s, local(ref.time_s)]), offset,
                                    velocity_basis=knots_basis(ref.time_s)))
             offset += 3 * ref.time_s.size
