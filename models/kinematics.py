@@ -55,6 +55,17 @@ def transducer_positions_earth(Lam, r, centre_of_rotation):
     return ca.mtimes(r, Lam.T) + ca.repmat(ca.reshape(centre_of_rotation, 1, 3), 4, 1)
 
 
+def centre_of_rotation_depth(transducer_depth_m, r):
+    """Depth of G below the surface (positive down): the transducer centre's depth when level
+    (H_O) less the mean vertical lever arm, H_O - mean_i r_iz (Eq. 66 with a level vessel).
+    Works on numbers (r an array) and on CasADi expressions."""
+    if isinstance(r, (ca.SX, ca.MX, ca.DM)):
+        return transducer_depth_m - ca.sum1(r[:, 2]) / 4
+    import numpy as np
+
+    return float(transducer_depth_m) - float(np.mean(np.asarray(r, dtype=float)[:, 2]))
+
+
 def transducer_state_function(attitude_fun: ca.Function) -> ca.Function:
     """Per-time kinematics from an attitude model, as one CasADi Function.
 

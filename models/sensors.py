@@ -31,6 +31,17 @@ def reference_point_velocity(vessel_velocity, dLam, point_body_m):
     return vessel_velocity + ca.mtimes(dLam, ca.reshape(point_body_m, 3, 1))
 
 
+def compass_correction(heading, misalignment, deviation_sin=0.0, deviation_cos=0.0):
+    """Heading correction of a compass: true heading = sensor heading + this.
+
+    A constant misalignment (declination not set, hard-iron offset, a head turned on its
+    mount) plus the one-cycle deviation B sin psi + C cos psi of the sensor heading psi.
+    Works on numbers and on CasADi expressions.
+    """
+    sin, cos = (ca.sin, ca.cos) if isinstance(heading, (ca.SX, ca.MX)) else (np.sin, np.cos)
+    return misalignment + deviation_sin * sin(heading) + deviation_cos * cos(heading)
+
+
 def irregular_times(rng: np.random.Generator, t_start: float, t_end: float, interval_min_s: float, interval_max_s: float) -> np.ndarray:
     """Sample times with intervals drawn uniformly in [interval_min_s, interval_max_s]."""
     if not 0 < interval_min_s <= interval_max_s:
