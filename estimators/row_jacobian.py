@@ -24,6 +24,12 @@ import scipy.sparse as sp
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 
 
+def _pattern_of(sparsity: ca.Sparsity) -> sp.csr_matrix:
+    """A CasADi sparsity pattern as a scipy CSR matrix of ones."""
+    rows, cols = sparsity.get_triplet()
+    return sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=sparsity.shape)
+
+
 def _pool(threads: int) -> ThreadPoolExecutor:
     """One pool per thread count for the process (problems come and go, threads stay few)."""
     if threads not in _POOLS:
@@ -35,10 +41,13 @@ def _pool(threads: int) -> ThreadPoolExecutor:
 class RowBlock:
     """Residual rows ``offset + i * n + j`` (output i of row j) of one mapped per-row model.
 
-    ``fun(d, v, s) -> y (k,)``: d the row's data (n_d,), v its velocity (3,) and s the
-    shared vector; only derivatives matter, so measured values and constants may be
-    left out of y. ``data`` is (n_d, n); ``velocity_basis`` (n, K) interpolates the K
-    knot velocities to the rows (None: no velocity); ``sign`` multiplies each output.
+    ``fun(d, v, s) -> y (k,)``: d the row's data (n_d,), v its velocity (3,) and s its share
+    of the shared vector (``shared_index``: which entries; None: all of it); only derivatives
+    matter, so measured values and constants may be left out of y. ``data`` is (n_d, n);
+    ``velocity_basis`` (n, K) interpolates the K knot velocities to the rows (None: no
+    velocity) and ``knot_columns`` (K, 3) are those knots' columns of z (None: the
+    Jacobian's own); ``sign`` multiplies each output. With several runs in one problem each
+    run's blocks take their run's attitude and knots only: the Jacobian stays block-sparse.
     """
 
     fun: ca.Function
@@ -46,6 +55,8 @@ class RowBlock:
     offset: int
     velocity_basis: sp.csr_matrix | None = None
     sign: np.ndarray | None = None
+    shared_index: np.ndarray | None = None
+    knot_columns: np.ndarray | None = None
 
 
 class RowJacobian:
@@ -53,9 +64,9 @@ class RowJacobian:
     J^T J formed block by block (the Gauss-Newton Hessian, without assembling J).
 
     ``shared`` is the MX expression s(z); ``knot_columns`` (K, 3) the columns of z holding
-    the knot velocities and ``knot_scale`` their scale (x = scale z). ``threads``: each
-    block's rows are split into this many contiguous chunks evaluated at once (CasADi
-    releases Python's lock while it evaluates).
+    the knot velocities (for blocks that do not name their own) and ``knot_scale`` the
+    scale of z (x = scale z). ``threads``: each block's rows are split into this many
+    contiguous chunks evaluated at once (CasADi releases Python's lock while it evaluates).
     """
 
     def __init__(self, z: ca.MX, shared: ca.MX, blocks: list[RowBlock], n_rows: int,
@@ -63,11 +74,15 @@ class RowJacobian:
         self.n_rows, self.n_z = n_rows, z.shape[0]
         self.n_p = n_rows  # the NLP's parameters are the residual weights, one per row
         self._shared = ca.Function("shared", [z], [shared, ca.jacobian(shared, z)])
-        ds = self._shared.sparsity_out(1)
-        self._shared_cols = np.unique(np.asarray(ds.get_triplet()[1], dtype=int))
+        ds = _pattern_of(self._shared.sparsity_out(1))
         self.blocks = blocks
-        self.knot_columns = knot_columns
         self.knot_scale = knot_scale
+        self._index, self._cols, self._knots = [], [], []
+        for b in blocks:
+            index = np.arange(shared.shape[0]) if b.shared_index is None else np.asarray(b.shared_index, dtype=int)
+            self._index.append(index)
+            self._cols.append(np.unique(ds[index].indices) if index.size else np.zeros(0, dtype=int))
+            self._knots.append(b.knot_columns if b.knot_columns is not None else knot_columns)
         self._jac, self._chunks = [], []
         for b in blocks:
             d, v, s = (ca.SX.sym(n, b.fun.sparsity_in(i)) for i, n in enumerate(("d", "v", "s")))
@@ -114,41 +129,43 @@ class RowJacobian:
         return out
 
     def _pattern(self) -> sp.csr_matrix:
-        """Structural pattern of J (rows x z): the shared columns and the row's knots."""
+        """Structural pattern of J (rows x z): each block's shared columns and its rows' knots."""
         rows, cols = [], []
-        for b in self.blocks:
+        for b, sc, knots in zip(self.blocks, self._cols, self._knots):
             k, n = b.fun.size1_out(0), b.data.shape[1]
             r = b.offset + np.arange(k * n)
-            rows.append(np.repeat(r, self._shared_cols.size))
-            cols.append(np.tile(self._shared_cols, r.size))
-            if b.velocity_basis is not None and self.knot_columns is not None:
+            rows.append(np.repeat(r, sc.size))
+            cols.append(np.tile(sc, r.size))
+            if b.velocity_basis is not None and knots is not None:
                 H = b.velocity_basis.tocoo()
                 for i in range(k):
                     for a in range(3):
                         rows.append(b.offset + i * n + H.row)
-                        cols.append(self.knot_columns[H.col, a])
+                        cols.append(knots[H.col, a])
         rows, cols = np.concatenate(rows), np.concatenate(cols)
         return sp.csr_matrix((np.ones(rows.size, dtype=bool), (rows, cols)), shape=(self.n_rows, self.n_z))
 
     def _parts(self, z, w):
-        """Per block: its rows r (k n,), the weighted shared-column part (k n, n_shared_cols)
-        dense, and the weighted knot part (k n, n_z) sparse (None without knots)."""
+        """Per block: its rows r (k n,), its shared columns c, the weighted shared-column part
+        (k n, len(c)) dense, and the weighted knot part (k n, n_z) sparse (None without knots)."""
         w = np.asarray(w, dtype=float).ravel()
         s, ds_dz = self._shared(z)
         s = s.full().ravel()
-        ds_dz = ds_dz.full()[:, self._shared_cols]  # (ns, n_shared_cols)
+        ds_dz = ds_dz.sparse().tocsr()
         for index, b in enumerate(self.blocks):
             k, n = b.fun.size1_out(0), b.data.shape[1]
+            sc, knot_columns = self._cols[index], self._knots[index]
             v = np.zeros((n, 3))  # (n, 3): CasADi's column-major (3, n)
-            knotted = b.velocity_basis is not None and self.knot_columns is not None
+            knotted = b.velocity_basis is not None and knot_columns is not None
             if knotted:
-                knots = np.asarray(z, dtype=float).ravel()[self.knot_columns] * self.knot_scale[self.knot_columns]
+                knots = np.asarray(z, dtype=float).ravel()[knot_columns] * self.knot_scale[knot_columns]
                 v = b.velocity_basis @ knots
-            jv, js = self._evaluate(index, v, s)
+            jv, js = self._evaluate(index, v, s[self._index[index]])
             sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
             r = b.offset + np.arange(k * n)
             wr = w[r]
-            shared = ((js.transpose(2, 0, 1) * sign[:, None, None]) @ ds_dz).reshape(k * n, -1) * wr[:, None]
+            ds_b = ds_dz[self._index[index]][:, sc].toarray()  # (ns_b, len(sc))
+            shared = ((js.transpose(2, 0, 1) * sign[:, None, None]) @ ds_b).reshape(k * n, -1) * wr[:, None]
             knot_part = None
             if knotted:
                 jv = jv.transpose(2, 0, 1) * sign[:, None, None]  # (k, n, 3)
@@ -156,19 +173,19 @@ class RowJacobian:
                 rows, cols, vals = [], [], []
                 for i in range(k):
                     for a in range(3):
-                        c = self.knot_columns[H.col, a]
+                        c = knot_columns[H.col, a]
                         rows.append(i * n + H.row)
                         cols.append(c)
                         vals.append(jv[i, H.row, a] * H.data * self.knot_scale[c] * wr[i * n + H.row])
                 knot_part = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                                           shape=(k * n, self.n_z))
-            yield r, shared, knot_part
+            yield r, sc, shared, knot_part
 
     def __call__(self, z, w) -> sp.csr_matrix:
         rows, cols, vals = [], [], []
-        for r, shared, knot_part in self._parts(z, w):
-            rows.append(np.repeat(r, self._shared_cols.size))
-            cols.append(np.tile(self._shared_cols, r.size))
+        for r, sc, shared, knot_part in self._parts(z, w):
+            rows.append(np.repeat(r, sc.size))
+            cols.append(np.tile(sc, r.size))
             vals.append(shared.reshape(-1))
             if knot_part is not None:
                 kp = knot_part.tocoo()
@@ -182,8 +199,7 @@ class RowJacobian:
         """J^T J (n_z, n_z) dense, block by block, without forming J: the shared columns'
         part by a dense product, the knots' by sparse ones (knot and shared columns are disjoint)."""
         G = np.zeros((self.n_z, self.n_z))
-        sc = self._shared_cols
-        for _, shared, knot_part in self._parts(z, w):
+        for _, sc, shared, knot_part in self._parts(z, w):
             G[np.ix_(sc, sc)] += shared.T @ shared
             if knot_part is not None:
                 cross = knot_part.T @ shared  # (n_z, n_shared_cols), zero on the shared rows
