@@ -107,10 +107,11 @@ class Attitude:
     frame: str = "vessel"
 
     def ypr(self) -> np.ndarray:
-        """(M, 3) yaw, pitch, roll with the heading unwrapped."""
-        return np.column_stack(
-            [np.unwrap(self.heading_rad), self.pitch_rad, self.roll_rad]
-        )
+        """(M, 3) yaw, pitch, roll with the heading unwrapped over its valid samples (NaN stays NaN)."""
+        heading = np.array(self.heading_rad, dtype=float)
+        ok = np.isfinite(heading)
+        heading[ok] = np.unwrap(heading[ok])
+        return np.column_stack([heading, self.pitch_rad, self.roll_rad])
 
 
 @dataclass(frozen=True)

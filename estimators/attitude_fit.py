@@ -211,9 +211,12 @@ def fit_attitude(case: Case, max_modes: int = 3, fixed_modes: int | None = None,
     paper's way, used by the two-stage baseline); otherwise the modes are shared.
     """
     a = case.attitude
-    t = a.time_s
     t_ref = float(case.pings.time_s[0]) if t_ref is None else float(t_ref)
     ypr = a.ypr()
+    valid = np.all(np.isfinite(ypr), axis=1)  # missing samples (NaN) are left out, not interpolated
+    if valid.sum() < 3:
+        raise ValueError(f"{case.name}: attitude: expected at least 3 samples with heading, pitch and roll, got {int(valid.sum())}")
+    t, ypr = a.time_s[valid], ypr[valid]
     if per_axis:
         fr = fit_modes(t, ypr[:, 2], t_ref, max_modes, fixed_modes)
         fp = fit_modes(t, ypr[:, 1], t_ref, max_modes, fixed_modes)
