@@ -62,13 +62,14 @@ def _correct(job: CorrectJob) -> dict:
 
     from .cases.corrected import write_correction
     from .cases.io import read_case
-    from .estimators.correct_case import correct_case
+    from .estimators.correct_case import as_calibrated_run, correct_case
 
     calibration = None
     if job.calibration_path is not None:
         with open(job.calibration_path) as fh:
             calibration = json.load(fh)
-    result = correct_case(read_case(job.case_path), job.method, calibration, job.timing)
+    case = as_calibrated_run(read_case(job.case_path), job.case_path, calibration)
+    result = correct_case(case, job.method, calibration, job.timing)
     write_correction(result, job.out_path, source_case=job.case_path)
     v = result.vessel_velocity_m_s
     return {"success": True, "method": result.method, "pings": len(v),

@@ -72,6 +72,7 @@ def cmd_info(args) -> int:
 
 
 from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
+from .estimators.correct_case import as_calibrated_run  # noqa: E402
 from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
@@ -135,15 +136,17 @@ def cmd_correct(args) -> int:
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
     refuse_overwrite_input(args.out, args.case, args.calibration)
-    case = _read(args.case)
-    result = _correct(case, args.method, _load_calibration(args.calibration), args.timing)
+    calibration = _load_calibration(args.calibration)
+    case = as_calibrated_run(_read(args.case), args.case, calibration)
+    result = _correct(case, args.method, calibration, args.timing)
     write_correction(result, args.out, source_case=str(args.case))
     v = result.vessel_velocity_m_s
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
           f"mean horizontal speed {np.nanmean(np.hypot(v[:, 0], v[:, 1])):.4f} m/s, "
           f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
-    if result.attrs.get("installation_note"):
-        print(f"warning: {result.attrs['installation_note']}")
+    for key in ("installation_note", "moving_bed_note"):
+        if result.attrs.get(key):
+            print(f"{'note' if key == 'moving_bed_note' else 'warning'}: {result.attrs[key]}")
     return 0
 
 
@@ -152,8 +155,8 @@ def cmd_compare(args) -> int:
     from .estimators.metrics import format_table, velocity_metrics
     from .plots import velocity_figure
 
-    case = _read(args.case)
     calibration = _load_calibration(args.calibration)
+    case = as_calibrated_run(_read(args.case), args.case, calibration)
     methods = [m for m in CORRECTION_METHODS if m != "oracle" or case.truth is not None]
     if calibration is None:
         methods = [m for m in methods if m in ("asc", "oracle")]
@@ -193,37 +196,19 @@ def cmd_compare(args) -> int:
 def _calibration_config(args, formulation=None):
     from .estimators.calibration import CalibrationConfig
 
+    declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
     return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
-                             jacobian=args.jacobian, attitude=args.attitude)
+                             jacobian=args.jacobian, attitude=args.attitude, moving_bed=args.moving_bed,
+                             moving_bed_section_knots=args.bed_knots, compass_deviation=args.compass_deviation,
+                             standard_errors=args.standard_errors, magnetic_declination_rad=declination)
 
 
-def cmd_calibrate(args) -> int:
-    import warnings
-
-    from .cases.atomic import refuse_overwrite_input
-    from .cases.collect import collect_case_paths, is_many
-    from .estimators.calibration import CalibrationProblem
-
-    if is_many(args.case):
-        from .batch import CalibrateJob, check_scheduler
-
-        check_scheduler(args.scheduler)
-        config = _calibration_config(args)
-        paths, out = collect_case_paths(args.case), _batch_out(args)
-        jobs = [CalibrateJob(str(p), str((out / f"{p.stem}.json").resolve()), config) for p in paths]
-        return _run_batch(args, jobs, [("objective", "objective", 12, "{:.6g}".format),
-                                       ("max viol", "max_constraint_violation", 10, "{:.1e}".format),
-                                       ("at best", "fraction_at_best", 9, "{:.2f}".format)])
-    args.case = args.case[0]
-    refuse_overwrite_input(args.out, args.case)
-    case = _read(args.case)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # every warning is written into the result and printed below
-        result = CalibrationProblem(case, _calibration_config(args)).solve()
-    result.to_json(args.out)
+def _print_calibration(result, title: str) -> None:
+    """What a calibration found, with standard errors, in the field's words."""
     ms = result.multistart
-    print(f"{case.name}: {args.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
+    deg = np.rad2deg
+    print(f"{title}: {result.config.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
           f"{result.jacobian} Jacobian, beams' attitude from the {result.attitude_source}")
     print(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
           f"{result.max_constraint_violation:.2e}; {ms.time_s:.2f} s")
@@ -234,15 +219,71 @@ def cmd_calibrate(args) -> int:
                           for v, s in zip(result.lever_arms_sensor_m[i], result.lever_arms_sensor_se_m[i]))
         print(f"  r{i + 1}: {cells}")
     if np.isfinite(result.heading_misalignment_se_rad):
-        print(f"heading misalignment against the reference (deg): {np.rad2deg(result.heading_misalignment_rad):+.4f} "
-              f"+- {np.rad2deg(result.heading_misalignment_se_rad):.4f} (head sensor: written as the installation yaw; "
-              f"installation pitch and roll not determined)")
+        print(f"heading misalignment against the reference (deg): {deg(result.heading_misalignment_rad):+.4f} "
+              f"+- {deg(result.heading_misalignment_se_rad):.4f} (true heading = sensor heading + misalignment; head "
+              f"sensor: written as the installation yaw, installation pitch and roll not determined)")
+    if result.compass_deviation_rad is not None:
+        b, c = deg(result.compass_deviation_rad)
+        sb, sc = deg(result.compass_deviation_se_rad)
+        print(f"compass deviation (deg): {b:+.3f} +- {sb:.3f} sin(heading) {c:+.3f} +- {sc:.3f} cos(heading)")
+    if result.magnetic_declination_rad is not None:
+        err = result.compass_error_rad
+        print(f"magnetic declination (deg): {deg(result.magnetic_declination_rad):+.2f} ({result.magnetic_declination_note})"
+              + ("" if err is None else f"; compass error = misalignment - declination: {deg(err):+.2f} deg"))
     if result.installation_determined:
         print("installation yaw/pitch/roll (deg): " + ", ".join(
-            f"{np.rad2deg(v):+.4f} +- {np.rad2deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad)))
-    print("noise sigma: " + ", ".join(f"{k} {v:.4g}" for k, v in result.noise_sigma.items()))
+            f"{deg(v):+.4f} +- {deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad)))
+    if result.moving_bed != "off":
+        fmt = lambda v, s: ("not determined" if v is None or not np.all(np.isfinite(s)) else
+                            f"north {v[0]:+.4f} +- {s[0]:.4f}, east {v[1]:+.4f} +- {s[1]:.4f}")
+        print(f"moving bed ({result.moving_bed}, m/s): {fmt(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s)}")
+        if len(result.runs) > 1:
+            for run in result.runs:
+                print(f"  {run.case}: {fmt(run.moving_bed_velocity_m_s, run.moving_bed_velocity_se_m_s)}")
+    inflation = result.standard_errors.get("inflation_over_white", {})
+    if inflation:
+        worst = max(inflation, key=inflation.get)
+        print(f"standard errors: {result.standard_errors['method']} (Newey-West lags {result.standard_errors['lags']}); "
+              f"largest inflation over white noise x{inflation[worst]:.2f} ({worst})")
+    print("noise sigma: " + ", ".join(f"{k} {v:.4g}" for k, v in result.noise_sigma.items() if v is not None))
     for w in result.warnings:
         print(f"warning: {w}")
+
+
+def cmd_calibrate(args) -> int:
+    import warnings
+
+    from .cases.atomic import refuse_overwrite_input
+    from .cases.collect import collect_case_paths, is_many
+    from .estimators.calibration import CalibrationProblem
+
+    if is_many(args.case) and not args.joint:
+        from .batch import CalibrateJob, check_scheduler
+
+        check_scheduler(args.scheduler)
+        config = _calibration_config(args)
+        paths, out = collect_case_paths(args.case), _batch_out(args)
+        jobs = [CalibrateJob(str(p), str((out / f"{p.stem}.json").resolve()), config) for p in paths]
+        return _run_batch(args, jobs, [("objective", "objective", 12, "{:.6g}".format),
+                                       ("max viol", "max_constraint_violation", 10, "{:.1e}".format),
+                                       ("at best", "fraction_at_best", 9, "{:.2f}".format)])
+    if args.joint:
+        paths = collect_case_paths(args.case)
+        refuse_overwrite_input(args.out, *paths)
+        cases = [_read(p) for p in paths]
+        if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
+            cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
+        title = f"{len(cases)} runs ({', '.join(c.name for c in cases)}), one NLP"
+    else:
+        args.case = args.case[0]
+        refuse_overwrite_input(args.out, args.case)
+        cases = _read(args.case)
+        title = cases.name
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # every warning is written into the result and printed below
+        result = CalibrationProblem(cases, _calibration_config(args)).solve()
+    result.to_json(args.out)
+    _print_calibration(result, title)
     print(f"wrote {args.out}")
     return 0 if result.success else 1
 
@@ -450,12 +491,26 @@ def build_parser() -> argparse.ArgumentParser:
                             "no motion model follows)")
         s.add_argument("--jacobian", default="auto",
                        help="auto | symbolic (whole problem differentiated by CasADi) | assembled (per-row, long runs)")
+        s.add_argument("--moving-bed", default="auto", choices=["auto", "off", "constant", "section"],
+                       help="bed moving under the bottom track: auto (constant with a moving reference), off (a bed "
+                            "verified fixed), constant, or section (a function of the position along the section)")
+        s.add_argument("--bed-knots", type=int, default=3, help="--moving-bed section: values across the section")
+        s.add_argument("--compass-deviation", default="auto", choices=["auto", "on", "off"],
+                       help="head sensor: add B sin(heading) + C cos(heading) to the misalignment (auto: when the "
+                            "headings span enough)")
+        s.add_argument("--standard-errors", default="hac", choices=["hac", "white"],
+                       help="hac (Newey-West sandwich, coloured residuals) or white")
+        s.add_argument("--declination-deg", type=float,
+                       help="magnetic declination at the site (east positive), when the cases carry no position and date")
 
     s = sub.add_parser("calibrate", help="estimate attitude model, lever arms and installation angles (one or many cases)")
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
     calibration_options(s)
     batch_options(s)
-    s.add_argument("--out", required=True, help="CALIB.json; with many cases, a folder (CASE.json each, summary.json)")
+    s.add_argument("--joint", action="store_true",
+                   help="several runs of one boat at one site in ONE NLP (shared lever arms, installation or heading "
+                        "misalignment, moving bed); --out is then one CALIB.json")
+    s.add_argument("--out", required=True, help="CALIB.json; with many cases (not --joint), a folder (CASE.json each, summary.json)")
     s.set_defaults(func=cmd_calibrate)
 
     s = sub.add_parser("compare-formulations", help="calibrate with every constraint formulation and tabulate")

@@ -34,6 +34,7 @@ from ..models.doppler import ratio_from_radial
 from ..models.janus import beam_to_instrument
 from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 from ..models.rotations import euler_matrix
+from ..models.sensors import compass_correction
 from .asc import Correction
 from .attitude_fit import fit_attitude
 
@@ -196,12 +197,17 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
 
     For a sensor inside the head, the misalignment found against the reference (compass error,
     magnetic declination) is an Earth-frame heading offset, Rz(d) Lambda = Lambda(psi + d): it is
-    applied to the readings, like TRDI's heading bias (EB). Other cases are returned unchanged.
+    applied to the readings, like TRDI's heading bias (EB), with the compass's one-cycle deviation
+    when the calibration found one (:func:`~adcpdyn.models.sensors.compass_correction`). Other
+    cases are returned unchanged.
     """
     delta = None if calibration is None else calibration.get("heading_misalignment_rad")
     if delta is None or case.attitude.frame != "transducer":
         return case
-    att = dataclasses.replace(case.attitude, heading_rad=case.attitude.heading_rad + float(delta))
+    deviation = calibration.get("compass_deviation_rad") or {}
+    psi = case.attitude.heading_rad
+    correction = compass_correction(psi, float(delta), float(deviation.get("sin") or 0.0), float(deviation.get("cos") or 0.0))
+    att = dataclasses.replace(case.attitude, heading_rad=psi + correction)
     return case.replace(attitude=att)
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..cases.case import Case
@@ -26,10 +28,65 @@ def assumed_installation(calibration: dict) -> np.ndarray:
     return np.asarray(value, dtype=float)
 
 
+def moving_bed_for(calibration: dict | None, case: Case) -> tuple[np.ndarray | None, str]:
+    """The bed velocity (north, east) a calibration found under this case's pings, and where it
+    came from: the case's own entry in ``runs``, else the survey's bed (a case not among the
+    calibrated runs, same site), else none (no bed estimated or not determined)."""
+    if calibration is None:
+        return None, ""
+    runs = calibration.get("runs") or []
+    own = next((r for r in runs if r.get("case") == case.name), None)
+    if own is not None and own.get("moving_bed_velocity_m_s") is not None:
+        return np.asarray(own["moving_bed_velocity_m_s"], dtype=float), f"run {case.name!r} of the calibration"
+    bed = calibration.get("moving_bed_velocity_m_s")
+    if bed is None or any(v is None for v in bed):
+        return None, ""
+    return np.asarray(bed, dtype=float), "the calibration's site bed (this case is not one of its runs)"
+
+
+def as_calibrated_run(case: Case, path, calibration: dict | None) -> Case:
+    """A joint calibration keys its runs by case name, or by file name when the cases shared one:
+    the case named so that :func:`moving_bed_for` finds its own run."""
+    from pathlib import Path
+
+    runs = [r.get("case") for r in (calibration or {}).get("runs") or []]
+    if case.name not in runs and Path(path).stem in runs:
+        return case.replace(name=Path(path).stem)
+    return case
+
+
+def with_moving_bed(result, bed: np.ndarray, source: str):
+    """Bottom track measures the vessel over a moving bed: add the bed back to the vessel velocity
+    and to water velocities referenced to it, and say so in the attributes."""
+    offset = np.array([bed[0], bed[1], 0.0])
+    water = None if result.water_velocity_m_s is None else result.water_velocity_m_s + offset
+    attrs = {**result.attrs, "moving_bed_velocity_m_s": offset[:2].tolist(),
+             "moving_bed_note": f"bed velocity from {source} added to the bottom-track vessel velocity "
+                                "(and to the water velocities referenced to it): velocities are over ground"}
+    return dataclasses.replace(result, vessel_velocity_m_s=result.vessel_velocity_m_s + offset, water_velocity_m_s=water,
+                               attrs=attrs)
+
+
 def correct_case(case: Case, method: str, calibration: dict | None, timing: str = "deep"):
     """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
     sensor, its heading misalignment) or a dynamic method of
-    :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``."""
+    :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``; then the moving bed
+    the calibration found under this case added back (:func:`moving_bed_for`)."""
+    result = _correct(case, method, calibration, timing)
+    bed, source = moving_bed_for(calibration, case) if method != "oracle" else _true_bed(case)
+    return result if bed is None else with_moving_bed(result, bed, source)
+
+
+def _true_bed(case: Case) -> tuple[np.ndarray | None, str]:
+    """The oracle's bed: the one the simulator moved (``/truth`` effects), if any."""
+    effects = [] if case.truth is None else case.truth.effects
+    beds = [e["params"] for e in effects if e.get("name") == "moving_bed"]
+    if not beds:
+        return None, ""
+    return np.array([beds[0]["velocity_north_m_s"], beds[0]["velocity_east_m_s"]]), "/truth (the simulated bed)"
+
+
+def _correct(case: Case, method: str, calibration: dict | None, timing: str):
     from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
