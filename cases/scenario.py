@@ -66,7 +66,12 @@ class Platform:
 
 @dataclass(frozen=True)
 class Noise:
-    """Measurement noise (1-sigma) and sensor resolution."""
+    """Measurement noise (1-sigma) and sensor resolution.
+
+    ``bt_ar1`` and ``reference_ar1`` colour the bottom-track and reference (GNSS) noise:
+    lag-1 autocorrelation from sample to sample of an AR(1) process with the same
+    stationary variance as the white noise (0, the default, is white).
+    """
 
     bt_m_s: float = 0.003  # bottom-track radial, constant part
     bt_fraction: float = 0.003  # ... plus this fraction of the transducer speed
@@ -78,6 +83,14 @@ class Noise:
     heading_rad: float = np.deg2rad(0.5)
     attitude_resolution_rad: float = np.deg2rad(0.01)
     reference_m_s: float = 0.003
+    bt_ar1: float = 0.0  # lag-1 autocorrelation of the BT noise from ping to ping
+    reference_ar1: float = 0.0  # ... of the reference velocity noise from sample to sample
+
+    def __post_init__(self):
+        for name in ("bt_ar1", "reference_ar1"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and -1.0 < value < 1.0):
+                raise ValueError(f"noise.{name}: expected a lag-1 autocorrelation in (-1, 1), got {value!r}")
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from .janus import janus_beam_directions, janus_transducer_positions
 from .kinematics import radius_vectors, transducer_state_function
 from .motion import attitude_function, stack_matrices
 from .navigation import Track
-from .sensors import irregular_times, quantise, reference_point_velocity, sensed_attitude, wrap_heading
+from .sensors import ar1_noise, irregular_times, quantise, reference_point_velocity, sensed_attitude, wrap_heading
 
 FIXED_POINT_ITERATIONS = 8
 
@@ -157,7 +157,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         ratio = bottom_echo_ratio(u_tx, u_rx, c_true)
     bt = radial_from_ratio(ratio, c_inst)
     speed = np.linalg.norm(tx["velocity"], axis=-1)
-    bt = bt + rng.normal(size=bt.shape) * np.hypot(noise.bt_m_s, noise.bt_fraction * speed)
+    bt = bt + ar1_noise(rng.normal(size=bt.shape), noise.bt_ar1) * np.hypot(noise.bt_m_s, noise.bt_fraction * speed)
     rng_m = c_inst * (t_R - t_T[:, None]) / 2  # the instrument's range from the round-trip time
     rng_m = rng_m + rng.normal(size=rng_m.shape) * (noise.range_m + noise.range_fraction * rng_m)
     lost = rng.random(bt.shape) < noise.bt_dropout_probability
@@ -211,7 +211,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         v_sym, dL_sym = ca.SX.sym("v", 3), ca.SX.sym("dL", 3, 3)
         ref_fun = ca.Function("ref", [v_sym, dL_sym], [reference_point_velocity(v_sym, dL_sym, p_ref)]).map(t_ref.size)
         v_ref = np.asarray(ref_fun(ref_kin["vessel_velocity"].T, ref_kin["dLambda_dt"].transpose(1, 0, 2).reshape(3, -1))).T
-        v_ref = v_ref + rng.normal(size=v_ref.shape) * noise.reference_m_s
+        v_ref = v_ref + ar1_noise(rng.normal(size=v_ref.shape), noise.reference_ar1) * noise.reference_m_s
         reference = Reference(time_s=t_ref, velocity_m_s=v_ref, point_body_m=p_ref)
 
     truth = Truth(
