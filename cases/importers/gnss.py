@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...models.geodesy import local_north_east_m
 from ...models.rotations import course_difference_rad
 
 KNOT_M_S = 1852.0 / 3600.0
 DOLFYN_KNOT_DIVISOR = 1.944  # dolfyn stores VTG speed as knots / 1.944
-WGS84_A, WGS84_E2 = 6378137.0, 6.69437999014e-3
 MIN_FIXES = 5
 LAG_HALF_WIDTH_S, LAG_STEP_S = 5.0, 0.01
 MIN_CORRELATION = 0.5
@@ -86,11 +86,7 @@ def text_fixes(raw: bytes):
 
 
 def _local_ne(lat_deg, lon_deg):
-    lat0 = np.deg2rad(np.nanmean(lat_deg))
-    s2 = np.sin(lat0) ** 2
-    r_n = WGS84_A / np.sqrt(1 - WGS84_E2 * s2)
-    r_m = r_n * (1 - WGS84_E2) / (1 - WGS84_E2 * s2)
-    return np.deg2rad(lat_deg - np.nanmean(lat_deg)) * r_m, np.deg2rad(lon_deg - np.nanmean(lon_deg)) * r_n * np.cos(lat0)
+    return local_north_east_m(lat_deg, lon_deg, np.nanmean(lat_deg), np.nanmean(lon_deg))
 
 
 def _unique_increasing(t, *arrays):
