@@ -42,6 +42,9 @@ class GnssTrack:
     source: str
     velocity_from: str
     n_fixes: int
+    fix_time_utc_s: np.ndarray | None = None  # (P,) times of the GGA fixes, strictly increasing
+    latitude_deg: np.ndarray | None = None  # (P,) float64
+    longitude_deg: np.ndarray | None = None  # (P,) float64
 
 
 def _checksum_ok(match) -> bool:
@@ -106,12 +109,12 @@ def _track(t, lat, lon, course_deg, speed_m_s, source) -> GnssTrack:
         c = np.deg2rad(course_deg[vtg_ok])
         v = np.column_stack([speed_m_s[vtg_ok] * np.cos(c), speed_m_s[vtg_ok] * np.sin(c), np.full(c.size, np.nan)])
         tv = t[vtg_ok]
-        return GnssTrack(tv, v, np.column_stack([tv, tv]), source, "VTG speed and true course", int(t.size))
+        return GnssTrack(tv, v, np.column_stack([tv, tv]), source, "VTG speed and true course", int(t.size), t, lat, lon)
     n, e = _local_ne(lat, lon)
     dt = np.diff(t)
     v = np.column_stack([np.diff(n) / dt, np.diff(e) / dt, np.full(dt.size, np.nan)])
     return GnssTrack(0.5 * (t[1:] + t[:-1]), v, np.column_stack([t[:-1], t[1:]]), source,
-                     "differenced GGA positions (no VTG)", int(t.size))
+                     "differenced GGA positions (no VTG)", int(t.size), t, lat, lon)
 
 
 def read_track(raw: bytes, ds, coarse_offset_s: float, t_adcp0_utc_s: float) -> GnssTrack:
