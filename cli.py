@@ -22,8 +22,12 @@ def _read(path):
 def cmd_scenarios(args) -> int:
     from .cases.scenario import load_scenarios
 
+    from .cases.survey import survey_names
+
+    surveys = set(survey_names())
     for name, sc in load_scenarios().items():
-        print(f"{name:<20} {sc.platform.name:<14} {sc.run.description}")
+        label = " [survey: simulate --runs K for K transects]" if name in surveys else ""
+        print(f"{name:<20} {sc.platform.name:<14} {sc.run.description}{label}")
     return 0
 
 
@@ -32,9 +36,45 @@ def cmd_simulate(args) -> int:
     from .cases.scenario import get_scenario
     from .models.simulator import simulate
 
-    case = simulate(get_scenario(args.scenario), seed=args.seed)
-    write_case(case, args.out)
-    print(f"wrote {args.out}: {case.pings.n} pings, {case.attitude.time_s.size} attitude samples")
+    survey_options = {"--compass-deg": args.compass_deg, "--bed-speed": args.bed_speed, "--bed-profile": args.bed_profile}
+    if args.runs is None:
+        given = [k for k, v in survey_options.items() if v is not None]
+        if given:
+            raise ValueError(f"{given[0]}: only with --runs (a survey's transects)")
+        case = simulate(get_scenario(args.scenario), seed=args.seed)
+        write_case(case, args.out)
+        print(f"wrote {args.out}: {case.pings.n} pings, {case.attitude.time_s.size} attitude samples")
+        return 0
+    return _simulate_survey(args)
+
+
+def _simulate_survey(args) -> int:
+    """``--runs K``: the survey's K transects, ``OUT/NAME_run01.h5`` ..., and what they share."""
+    from .cases.io import write_case
+    from .cases.survey import is_survey, simulate_survey, survey_names
+
+    if not is_survey(args.scenario):
+        raise ValueError(f"--runs: scenario {args.scenario!r} is not a survey; surveys: {survey_names()}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out: {out} is a file; with --runs --out names a folder (one case per transect)")
+    compass = None if args.compass_deg is None else tuple(np.deg2rad(args.compass_deg))
+    cases = simulate_survey(args.scenario, args.runs, args.seed, compass_rad=compass, bed_speed_m_s=args.bed_speed,
+                            bed_profile=args.bed_profile)
+    out.mkdir(parents=True, exist_ok=True)
+    for case in cases:
+        path = out / f"{case.name}.h5"
+        write_case(case, path)
+        info = json.loads(case.truth.extra_attrs["survey"])
+        print(f"wrote {path}: {case.pings.n} pings, course {np.rad2deg(info['course_over_ground_rad']) % 360:.1f} deg, "
+              f"crab {np.rad2deg(info['crab_angle_rad']):+.1f} deg, UTC start {case.time_origin_utc}, effective heading "
+              f"misalignment {np.rad2deg(float(case.truth.extra_attrs['effective_heading_misalignment_rad'])):+.2f} deg")
+    effects = {e["name"]: e["params"] for e in cases[0].truth.effects}
+    abc = effects["compass_deviation"]
+    bed = effects["moving_bed"]
+    print(f"shared: compass A {np.rad2deg(abc['A_rad']):+.2f}, B {np.rad2deg(abc['B_rad']):+.2f}, "
+          f"C {np.rad2deg(abc['C_rad']):+.2f} deg; moving bed {np.hypot(bed['velocity_north_m_s'], bed['velocity_east_m_s']):.3f} "
+          f"m/s ({bed.get('profile', 'uniform')}), north {bed['velocity_north_m_s']:+.3f}, east {bed['velocity_east_m_s']:+.3f} m/s")
     return 0
 
 
@@ -440,10 +480,15 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("scenarios", help="list the built-in scenarios")
     s.set_defaults(func=cmd_scenarios)
 
-    s = sub.add_parser("simulate", help="simulate a scenario into a case file")
+    s = sub.add_parser("simulate", help="simulate a scenario into a case file (a survey's transects with --runs)")
     s.add_argument("scenario")
     s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--out", required=True)
+    s.add_argument("--out", required=True, help="CASE.h5; with --runs a folder (NAME_run01.h5, ...)")
+    s.add_argument("--runs", type=int, help="a survey's number of transects (alternating banks; seeds SEED, SEED+1, ...)")
+    s.add_argument("--compass-deg", type=float, nargs=3, metavar=("A", "B", "C"),
+                   help="survey: fix the compass deviation (heading reads psi + A + B sin psi + C cos psi); default drawn")
+    s.add_argument("--bed-speed", type=float, help="survey: fix the moving bed's speed downstream, m/s; default drawn")
+    s.add_argument("--bed-profile", choices=["uniform", "parabolic"], help="survey: bed speed across the section")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("import", help="import a TRDI PD0 or Nortek AD2CP file into a case file")

@@ -9,6 +9,7 @@ was read from.
 from __future__ import annotations
 
 import dataclasses
+import datetime as _dt
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -125,6 +126,40 @@ class Reference:
 
 
 @dataclass(frozen=True)
+class Position:
+    """``/position`` (optional): where the vessel was, on the case clock.
+
+    GNSS fixes (WGS84 latitude and longitude in degrees, the universal convention of
+    positions; float64 keeps about 1 mm) for what depends on the site, such as the
+    magnetic declination. With ``Case.time_origin_utc`` the fixes have dates too.
+    """
+
+    time_s: np.ndarray  # (P,) on the case clock, strictly increasing
+    latitude_deg: np.ndarray  # (P,) north positive
+    longitude_deg: np.ndarray  # (P,) east positive, in [-180, 180]
+
+
+def parse_utc(text: str) -> _dt.datetime:
+    """An ISO 8601 time as an aware UTC datetime; no offset means UTC.
+
+    Raises ValueError (with the text) when it is not ISO 8601.
+    """
+    if not isinstance(text, str):
+        raise ValueError(f"expected an ISO 8601 string, got {text!r}")
+    when = _dt.datetime.fromisoformat(text.strip())
+    if when.tzinfo is None:
+        return when.replace(tzinfo=_dt.timezone.utc)
+    return when.astimezone(_dt.timezone.utc)
+
+
+def format_utc(when: _dt.datetime) -> str:
+    """``YYYY-MM-DDTHH:MM:SS.ffffffZ`` of a datetime (naive taken as UTC)."""
+    if when.tzinfo is not None:
+        when = when.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+    return when.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+@dataclass(frozen=True)
 class Truth:
     """``/truth``: what a simulator used; absent from real and withheld cases."""
 
@@ -132,6 +167,7 @@ class Truth:
     installation_ypr_rad: np.ndarray  # (3,)
     vessel_velocity_m_s: np.ndarray  # (N, 3)
     water_velocity_m_s: np.ndarray | None = None  # (N, K, 3)
+    moving_bed_velocity_m_s: np.ndarray | None = None  # (N, 3) Earth velocity of the bed under each ping
     effects: list = field(default_factory=list)  # [{"name": ..., "params": {...}}]
     extra_attrs: dict = field(default_factory=dict)  # other attributes, JSON strings
 
@@ -150,6 +186,8 @@ class Case:
     water: Water | None = None
     reference: Reference | None = None
     truth: Truth | None = None
+    position: Position | None = None
+    time_origin_utc: str | None = None  # ISO 8601 UTC time of the case clock's zero (root attribute)
 
     def replace(self, **changes) -> "Case":
         """A copy with some fields replaced (``dataclasses.replace``)."""

@@ -26,10 +26,12 @@ from .case import (
     Environment,
     Instrument,
     Pings,
+    Position,
     Reference,
     Truth,
     Vessel,
     Water,
+    parse_utc,
 )
 
 __all__ = ["CaseFormatError", "read_case", "write_case", "validate_case"]
@@ -360,6 +362,36 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
                 c.fail("/truth", f"expected extra attribute names other than "
                                  f'"effects", got {key!r}')
             c.string(val, _attr("/truth", key))
+    _validate_site(case, c, n)
+
+
+def _validate_site(case: Case, c: _Checker, n: int) -> None:
+    """Where and when (optional): ``/position``, ``/.attrs["time_origin_utc"]`` and the
+    per-ping bed velocity ``/truth/moving_bed_velocity_m_s``."""
+    if case.time_origin_utc is not None:
+        f = _attr("/", "time_origin_utc")
+        text = c.string(case.time_origin_utc, f)
+        try:
+            parse_utc(text)
+        except ValueError:
+            c.fail(f, f'expected an ISO 8601 UTC time such as "2022-08-19T20:14:21Z", got {_q(text)}')
+    if case.position is not None:
+        pos = case.position
+        c.instance(pos, Position, "/position")
+        tp = c.times(pos.time_s, "/position/time_s", "P")
+        p_from = f"with P={tp.size} from /position/time_s"
+        for name, limit in (("latitude_deg", 90.0), ("longitude_deg", 180.0)):
+            f = f"/position/{name}"
+            x = c.shape(getattr(pos, name), f, (tp.size,), "(P,)", p_from)
+            c.finite(x, f)
+            bad = np.abs(x) > limit
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                c.fail(f, f"expected degrees with |{name[:-4]}| <= {limit:g}, got {_num(x[i])} at index {i}")
+    if case.truth is not None and case.truth.moving_bed_velocity_m_s is not None:
+        f = "/truth/moving_bed_velocity_m_s"
+        c.finite(c.shape(case.truth.moving_bed_velocity_m_s, f, (n, 3), "(N, 3)",
+                         f"with N={n} from /pings/time_s"), f)
 
 
 # ----------------------------------------------------------------------------------
@@ -567,13 +599,26 @@ def _read(f: h5py.File, rd: _Reader) -> Case:
             installation_ypr_rad=rd.dataset(g, "installation_ypr_rad"),
             vessel_velocity_m_s=rd.dataset(g, "vessel_velocity_m_s"),
             water_velocity_m_s=rd.dataset(g, "water_velocity_m_s", required=False),
+            moving_bed_velocity_m_s=rd.dataset(g, "moving_bed_velocity_m_s", required=False),
             effects=effects,
             extra_attrs=extra,
         )
 
     return Case(name=name, description=description, instrument=instrument,
                 environment=environment, vessel=vessel, pings=pings, water=water,
-                attitude=attitude, reference=reference, truth=truth)
+                attitude=attitude, reference=reference, truth=truth, **_read_site(root, rd))
+
+
+def _read_site(root: h5py.Group, rd: _Reader) -> dict:
+    """``/position`` and ``/.attrs["time_origin_utc"]`` (both optional)."""
+    g = rd.group(root, "position", required=False)
+    position = None if g is None else Position(
+        time_s=rd.dataset(g, "time_s"),
+        latitude_deg=rd.dataset(g, "latitude_deg"),
+        longitude_deg=rd.dataset(g, "longitude_deg"),
+    )
+    return {"position": position,
+            "time_origin_utc": rd.str_attr(root, "time_origin_utc", required=False, default=None)}
 
 
 def read_case(path) -> Case:
@@ -688,6 +733,19 @@ def _write(f: h5py.File, case: Case) -> None:
         g.attrs["effects"] = json.dumps(t.effects)
         for k, v in t.extra_attrs.items():
             g.attrs[k] = str(v)
+    _write_site(f, case)
+
+
+def _write_site(f: h5py.File, case: Case) -> None:
+    """``/position``, ``/.attrs["time_origin_utc"]``, ``/truth/moving_bed_velocity_m_s`` when present."""
+    if case.time_origin_utc is not None:
+        f.attrs["time_origin_utc"] = str(case.time_origin_utc)
+    if case.position is not None:
+        g = f.create_group("position")
+        for name in ("time_s", "latitude_deg", "longitude_deg"):
+            _ds(g, name, getattr(case.position, name))
+    if case.truth is not None:
+        _ds(f["truth"], "moving_bed_velocity_m_s", case.truth.moving_bed_velocity_m_s)
 
 
 def write_case(case: Case, path) -> None:

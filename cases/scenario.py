@@ -20,7 +20,7 @@ import numpy as np
 from ..models.motion import AttitudeParams
 from ..models.navigation import Navigation
 from ..models.sensors import ATTITUDE_FRAMES
-from .case import Vessel
+from .case import Vessel, parse_utc
 
 TIMINGS = ("two_way", "instantaneous")
 TRAVEL_TIMES = ("exact", "paper")
@@ -66,7 +66,12 @@ class Platform:
 
 @dataclass(frozen=True)
 class Noise:
-    """Measurement noise (1-sigma) and sensor resolution."""
+    """Measurement noise (1-sigma) and sensor resolution.
+
+    ``bt_ar1`` and ``reference_ar1`` colour the bottom-track and reference (GNSS) noise:
+    lag-1 autocorrelation from sample to sample of an AR(1) process with the same
+    stationary variance as the white noise (0, the default, is white).
+    """
 
     bt_m_s: float = 0.003  # bottom-track radial, constant part
     bt_fraction: float = 0.003  # ... plus this fraction of the transducer speed
@@ -78,6 +83,14 @@ class Noise:
     heading_rad: float = np.deg2rad(0.5)
     attitude_resolution_rad: float = np.deg2rad(0.01)
     reference_m_s: float = 0.003
+    bt_ar1: float = 0.0  # lag-1 autocorrelation of the BT noise from ping to ping
+    reference_ar1: float = 0.0  # ... of the reference velocity noise from sample to sample
+
+    def __post_init__(self):
+        for name in ("bt_ar1", "reference_ar1"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and -1.0 < value < 1.0):
+                raise ValueError(f"noise.{name}: expected a lag-1 autocorrelation in (-1, 1), got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -124,6 +137,30 @@ class WaterProfile:
 
 
 @dataclass(frozen=True)
+class Site:
+    """Where and when a run is (optional): the simulator then writes ``/position`` and
+    ``time_origin_utc``. G is at (start_north_m, start_east_m) at t_start_s in the local
+    tangent plane about (latitude, longitude)."""
+
+    latitude_rad: float
+    longitude_rad: float
+    time_origin_utc: str  # ISO 8601 UTC of the run clock's zero
+    start_north_m: float = 0.0
+    start_east_m: float = 0.0
+
+    def __post_init__(self):
+        if not abs(self.latitude_rad) < np.pi / 2:
+            raise ValueError(f"site.latitude_deg: expected |latitude| < 90, got {np.rad2deg(self.latitude_rad)!r}")
+        if not abs(self.longitude_rad) <= np.pi:
+            raise ValueError(f"site.longitude_deg: expected |longitude| <= 180, got {np.rad2deg(self.longitude_rad)!r}")
+        try:
+            parse_utc(self.time_origin_utc)
+        except ValueError:
+            raise ValueError(f"site.time_origin_utc: expected an ISO 8601 UTC time such as \"2022-08-19T20:14:21Z\", "
+                             f"got {self.time_origin_utc!r}") from None
+
+
+@dataclass(frozen=True)
 class Run:
     """One measurement with a platform: motion, navigation, water, sensors, noise."""
 
@@ -145,6 +182,7 @@ class Run:
     noise: Noise = field(default_factory=Noise)
     doppler: DopplerModel = field(default_factory=DopplerModel)
     effects: tuple = ()  # ({"name": effect, "params": {...}}, ...) injected beyond the base model
+    site: Site | None = None  # where and when: /position and time_origin_utc in the case
 
     def __post_init__(self):
         from ..models.effects import get_effect
@@ -199,13 +237,14 @@ def _deep_merge(base: dict, over: dict) -> dict:
 
 def _motion(d: dict, owner: str) -> AttitudeParams:
     d = _angles(d, owner)
-    allowed = {"roll_modes", "roll_bias_rad", "pitch_modes", "pitch_bias_rad", "yaw_trend", "yaw_coupling", "t_ref_s"}
+    allowed = {"roll_modes", "roll_bias_rad", "pitch_modes", "pitch_bias_rad", "yaw_trend", "yaw_coupling", "t_ref_s",
+               "yaw_modes"}
     unknown = sorted(set(d) - allowed)
     if unknown:
         raise ValueError(f"{owner}: unknown key(s) {unknown}; expected some of {sorted(allowed)}")
     return AttitudeParams.from_axis_modes(
         d.get("roll_modes", []), d.get("roll_bias_rad", 0.0), d.get("pitch_modes", []), d.get("pitch_bias_rad", 0.0),
-        d.get("yaw_trend", [0.0]), d.get("yaw_coupling"), float(d.get("t_ref_s", 0.0)))
+        d.get("yaw_trend", [0.0]), d.get("yaw_coupling"), float(d.get("t_ref_s", 0.0)), d.get("yaw_modes", ()))
 
 
 def _platform(d: dict, source: str) -> Platform:
@@ -229,6 +268,8 @@ def _run(name: str, d: dict, source: str) -> Run:
         d["water"] = _build(WaterProfile, d["water"], owner + ".water")
     d["noise"] = _build(Noise, _angles(d.get("noise", {}), owner), owner + ".noise")
     d["doppler"] = _build(DopplerModel, d.get("doppler", {}), owner + ".doppler")
+    if "site" in d:
+        d["site"] = _build(Site, _angles(d["site"], owner), owner + ".site")
     return _build(Run, d, owner)
 
 
@@ -239,9 +280,18 @@ def load_scenario_file(path) -> dict[str, Scenario]:
         data = tomllib.load(fh)
     platform = _platform(data["platform"], path.name)
     defaults = data.get("defaults", {})
+    surveys = data.get("survey", {})
+    missing = sorted(set(surveys) - set(data.get("runs", {})))
+    if missing:
+        raise ValueError(f"{path.name}: survey.{missing[0]}: expected a run template [runs.{missing[0]}], got none")
     out = {}
     for name, run in data.get("runs", {}).items():
-        out[name] = Scenario(name, platform, _run(name, _deep_merge(defaults, run), path.name))
+        merged = _deep_merge(defaults, run)
+        if name in surveys:  # a survey's template: listed as its first transect (cases/survey.py)
+            from .survey import nominal_transect
+
+            merged = nominal_transect(name, surveys[name], merged, path.name)
+        out[name] = Scenario(name, platform, _run(name, merged, path.name))
     return out
 
 

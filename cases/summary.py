@@ -66,6 +66,12 @@ def summarise(case: Case) -> str:
                          f"point {np.round(r.point_body_m, 3).tolist()} m")
         else:
             lines.append("reference    stationary vessel (velocity zero)")
+    if case.position is not None:
+        pos = case.position
+        lines.append(f"position     {pos.time_s.size} fixes, median {np.median(pos.latitude_deg):.5f} N "
+                     f"{np.median(pos.longitude_deg):.5f} E")
+    if case.time_origin_utc is not None:
+        lines.append(f"clock        zero at {case.time_origin_utc} (UTC)")
     if case.vessel.length_m:
         v = case.vessel
         lines.append(f"vessel       {v.length_m} x {v.beam_m} x {v.height_m} m, {v.mass_kg} kg")
@@ -74,7 +80,8 @@ def summarise(case: Case) -> str:
         lines.append(f"truth        present; effects: {', '.join(names) if names else 'none'}")
     groups = ["instrument", "environment", "pings", "attitude"] + [
         g for g, present in (("vessel", case.vessel.length_m is not None), ("water", case.water is not None),
-                             ("reference", case.reference is not None), ("truth", case.truth is not None)) if present
+                             ("reference", case.reference is not None), ("position", case.position is not None),
+                             ("truth", case.truth is not None)) if present
     ]
     lines.append(f"groups       {', '.join(groups)}")
     return "\n".join(lines)

@@ -172,11 +172,13 @@ class AttitudeParams:
 
     @classmethod
     def from_axis_modes(cls, roll_modes, roll_bias, pitch_modes, pitch_bias, yaw_trend, yaw_coupling=None,
-                        t_ref_s: float = 0.0) -> "AttitudeParams":
+                        t_ref_s: float = 0.0, yaw_modes=()) -> "AttitudeParams":
         """Build from per-axis modes in the paper's form: rows (A, t0, omega, decay).
 
         Roll's and pitch's modes become shared modes (zero on the other axis); yaw
         follows each mode scaled by ``yaw_coupling`` (one value per roll then pitch mode).
+        ``yaw_modes`` are further modes of the heading alone (a boat wandering about its
+        course while steered), zero on roll and pitch.
         """
         rows = [np.asarray(m, dtype=float).reshape(-1, 4) for m in (roll_modes, pitch_modes)]
         n_r, n_p = len(rows[0]), len(rows[1])
@@ -188,8 +190,15 @@ class AttitudeParams:
         roll_cs, pitch_cs = cs.copy(), cs.copy()
         roll_cs[n_r:] = 0.0
         pitch_cs[:n_r] = 0.0
+        yaw_cs = cs * coupling[:, None]
+        yaw_rows = np.asarray(yaw_modes, dtype=float).reshape(-1, 4)
+        if yaw_rows.size:
+            modes = np.vstack([modes, yaw_rows[:, 2:4]])
+            own = np.array([paper_to_cs(a, t0, w, v, t_ref_s) for a, t0, w, v in yaw_rows]).reshape(-1, 2)
+            roll_cs, pitch_cs = (np.vstack([x, np.zeros_like(own)]) for x in (roll_cs, pitch_cs))
+            yaw_cs = np.vstack([yaw_cs, own])
         return cls(modes, float(roll_bias), roll_cs, float(pitch_bias), pitch_cs, np.asarray(yaw_trend, dtype=float),
-                   cs * coupling[:, None], float(t_ref_s))
+                   yaw_cs, float(t_ref_s))
 
     def to_dict(self) -> dict:
         """JSON-ready description; each axis' mode also in the paper's (phi_0, t_0) form."""

@@ -52,6 +52,26 @@ def irregular_times(rng: np.random.Generator, t_start: float, t_end: float, inte
     return t[t <= t_end]
 
 
+def ar1_noise(white, rho: float) -> np.ndarray:
+    """Unit-variance AR(1) noise along axis 0 from white N(0, 1) draws.
+
+    e_0 = w_0, e_k = rho e_{k-1} + sqrt(1 - rho^2) w_k: stationary from the first sample,
+    variance 1 and lag-1 autocorrelation rho (sample to sample, whatever the spacing).
+    rho = 0 returns ``white`` itself (bit for bit).
+    """
+    white = np.asarray(white, dtype=float)
+    if not -1.0 < rho < 1.0:
+        raise ValueError(f"rho: expected a lag-1 autocorrelation in (-1, 1), got {rho!r}")
+    if rho == 0.0 or white.shape[0] < 2:
+        return white
+    from scipy.signal import lfilter
+
+    out = np.empty_like(white)
+    out[0] = white[0]
+    out[1:], _ = lfilter([np.sqrt(1.0 - rho**2)], [1.0, -rho], white[1:], axis=0, zi=(rho * white[0])[None, ...])
+    return out
+
+
 def quantise(x, step):
     """Round to the sensor's resolution (no-op for step <= 0)."""
     x = np.asarray(x, dtype=float)

@@ -18,15 +18,16 @@ from dataclasses import asdict
 import casadi as ca
 import numpy as np
 
-from ..cases.case import Attitude, Case, Environment, Instrument, Pings, Reference, Truth, Water
+from ..cases.case import Attitude, Case, Environment, Instrument, Pings, Position, Reference, Truth, Water, format_utc, parse_utc
 from ..cases.scenario import Scenario
 from .doppler import bottom_echo_ratio, radial_from_ratio, slant_range, water_echo_ratio
-from .effects import get_effect
+from .effects import Effect, get_effect
+from .geodesy import latitude_longitude_deg
 from .janus import janus_beam_directions, janus_transducer_positions
 from .kinematics import radius_vectors, transducer_state_function
 from .motion import attitude_function, stack_matrices
 from .navigation import Track
-from .sensors import irregular_times, quantise, reference_point_velocity, sensed_attitude, wrap_heading
+from .sensors import ar1_noise, irregular_times, quantise, reference_point_velocity, sensed_attitude, wrap_heading
 
 FIXED_POINT_ITERATIONS = 8
 
@@ -79,6 +80,7 @@ class _Kinematics:
             "position": beams(rot) + G[..., None, :],
             "velocity": beams(v_tan) + v_a[..., None, :],
             "vessel_velocity": v_a,
+            "G": G,
         }
 
 
@@ -127,6 +129,41 @@ def _echo(kin: _Kinematics, scenario: Scenario, t_T, tx, target_depth, c_true):
     return u_tx, u_rx, e_tx, e_rx, t_R, l
 
 
+def _site_plane(kin: _Kinematics, run):
+    """G's horizontal positions (..., 3) -> (n, 2) north, east in the run's site plane
+    (the site's start point at t_start_s; (0, 0) then without a site)."""
+    g0 = kin.at(np.array([run.t_start_s]))["G"][0, :2]
+    start = np.zeros(2) if run.site is None else np.array([run.site.start_north_m, run.site.start_east_m])
+    return lambda G: np.asarray(G)[..., :2].reshape(-1, 2) - g0 + start
+
+
+def _heading_truth(effects, true_read, t_att) -> dict:
+    """``effective_heading_misalignment_rad``: the mean over the attitude samples of true minus
+    read heading (true = read + misalignment) for effects that misread the heading (compass
+    deviation), with its spread; what a constant heading misalignment should recover."""
+    hooks = [(e, p) for e, p in effects if type(e).heading_correction is not Effect.heading_correction]
+    if not hooks:
+        return {}
+    psi = true_read(t_att)[:, 0]
+    correction = np.sum([e.heading_correction(psi, p) for e, p in hooks], axis=0)
+    return {"effective_heading_misalignment_rad": repr(float(np.mean(correction))),
+            "heading_correction_sd_rad": repr(float(np.std(correction)))}
+
+
+def _position(kin: _Kinematics, run, site_ne, times, point_body_m):
+    """Noise-free GNSS fixes of the reference point (antenna; G without a reference) at its
+    sample times (pings without), and the run clock's UTC zero, when the run has a site."""
+    if run.site is None:
+        return None, None
+    k = kin.at(times)
+    point = k["G"] + np.einsum("nij,j->ni", k["Lambda"], np.asarray(point_body_m, dtype=float))
+    ne = site_ne(point)
+    lat, lon = latitude_longitude_deg(ne[:, 0], ne[:, 1], np.rad2deg(run.site.latitude_rad),
+                                      np.rad2deg(run.site.longitude_rad))
+    return Position(time_s=np.asarray(times, dtype=float).copy(), latitude_deg=lat, longitude_deg=lon), \
+        format_utc(parse_utc(run.site.time_origin_utc))
+
+
 def simulate(scenario: Scenario, seed: int = 0) -> Case:
     """Simulate one run of a scenario; the same seed gives the same case.
 
@@ -149,15 +186,18 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
     tx = kin.at(t_T)
     depth = np.full(N, run.water_depth_m)
     u_tx, u_rx, e_tx, e_rx, t_R, _ = _echo(kin, scenario, t_T, tx, depth[:, None], c_true)
-    v_bed = [b for b in (e.bottom_velocity(p) for e, p in effects) if b is not None]
-    if v_bed:  # a moving bottom is a moving scatterer (Eq. 88)
+    site_ne = _site_plane(kin, run)
+    v_bed = [b for b in (e.bottom_velocity_at(t_T, site_ne(tx["G"]), p) for e, p in effects) if b is not None]
+    vb = None
+    if v_bed:  # a moving bottom is a moving scatterer (Eq. 88), at G's place at transmit
         vb = np.sum(v_bed, axis=0)
-        ratio = water_echo_ratio(u_tx, u_rx, np.sum(e_tx * vb, axis=-1), np.sum(e_rx * vb, axis=-1), c_true)
+        ratio = water_echo_ratio(u_tx, u_rx, np.sum(e_tx * vb[:, None, :], axis=-1),
+                                 np.sum(e_rx * vb[:, None, :], axis=-1), c_true)
     else:
         ratio = bottom_echo_ratio(u_tx, u_rx, c_true)
     bt = radial_from_ratio(ratio, c_inst)
     speed = np.linalg.norm(tx["velocity"], axis=-1)
-    bt = bt + rng.normal(size=bt.shape) * np.hypot(noise.bt_m_s, noise.bt_fraction * speed)
+    bt = bt + ar1_noise(rng.normal(size=bt.shape), noise.bt_ar1) * np.hypot(noise.bt_m_s, noise.bt_fraction * speed)
     rng_m = c_inst * (t_R - t_T[:, None]) / 2  # the instrument's range from the round-trip time
     rng_m = rng_m + rng.normal(size=rng_m.shape) * (noise.range_m + noise.range_fraction * rng_m)
     lost = rng.random(bt.shape) < noise.bt_dropout_probability
@@ -193,12 +233,14 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         lam = kin.at(times)["Lambda"]
         return np.asarray(sense.map(times.size)(lam.transpose(1, 0, 2).reshape(3, -1))).T
 
+    true_read = read
     for effect, params in effects:  # latency, low-pass, compass deviation
         read = effect.wrap_attitude_sensor(read, params)
     ypr = read(t_att)
     ypr = ypr + rng.normal(size=ypr.shape) * np.array([noise.heading_rad, noise.tilt_rad, noise.tilt_rad])
     ypr = quantise(ypr, noise.attitude_resolution_rad)
     attitude = Attitude(t_att, wrap_heading(ypr[:, 0]), ypr[:, 1], ypr[:, 2], frame=pf.mounting.attitude_frame)
+    heading_truth = _heading_truth(effects, true_read, t_att)
 
     # Reference velocity of a body point (GNSS antenna, video marker).
     reference = None
@@ -211,7 +253,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         v_sym, dL_sym = ca.SX.sym("v", 3), ca.SX.sym("dL", 3, 3)
         ref_fun = ca.Function("ref", [v_sym, dL_sym], [reference_point_velocity(v_sym, dL_sym, p_ref)]).map(t_ref.size)
         v_ref = np.asarray(ref_fun(ref_kin["vessel_velocity"].T, ref_kin["dLambda_dt"].transpose(1, 0, 2).reshape(3, -1))).T
-        v_ref = v_ref + rng.normal(size=v_ref.shape) * noise.reference_m_s
+        v_ref = v_ref + ar1_noise(rng.normal(size=v_ref.shape), noise.reference_ar1) * noise.reference_m_s
         reference = Reference(time_s=t_ref, velocity_m_s=v_ref, point_body_m=p_ref)
 
     truth = Truth(
@@ -219,6 +261,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         installation_ypr_rad=kin.installation_ypr.copy(),
         vessel_velocity_m_s=tx["vessel_velocity"].copy(),
         water_velocity_m_s=water_truth,
+        moving_bed_velocity_m_s=None if vb is None else np.array(vb, dtype=float),
         effects=[{"name": e.name, "params": p} for e, p in effects],
         extra_attrs={
             "attitude_model": json.dumps(run.motion.to_dict()),
@@ -226,8 +269,11 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
             "scenario": scenario.name,
             "seed": str(seed),
             "true_sound_speed_m_s": repr(float(c_true)),
+            **heading_truth,
         },
     )
+    gnss = reference is not None and reference.time_s is not None
+    position, time_origin = _position(kin, run, site_ne, reference.time_s if gnss else t_T, p_ref if gnss else np.zeros(3))
     case = Case(
         name=scenario.name,
         description=f"{run.description} (simulated by adcpdyn, seed {seed})".strip(),
@@ -244,6 +290,8 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
         attitude=attitude,
         reference=reference,
         truth=truth,
+        position=position,
+        time_origin_utc=time_origin,
     )
     for effect, params in effects:  # what the instrument records (nominal values)
         case = effect.record(case, params)

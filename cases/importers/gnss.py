@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...models.geodesy import local_north_east_m
 from ...models.rotations import course_difference_rad
 
 KNOT_M_S = 1852.0 / 3600.0
 DOLFYN_KNOT_DIVISOR = 1.944  # dolfyn stores VTG speed as knots / 1.944
-WGS84_A, WGS84_E2 = 6378137.0, 6.69437999014e-3
 MIN_FIXES = 5
 LAG_HALF_WIDTH_S, LAG_STEP_S = 5.0, 0.01
 MIN_CORRELATION = 0.5
@@ -42,6 +42,9 @@ class GnssTrack:
     source: str
     velocity_from: str
     n_fixes: int
+    fix_time_utc_s: np.ndarray | None = None  # (P,) times of the GGA fixes, strictly increasing
+    latitude_deg: np.ndarray | None = None  # (P,) float64
+    longitude_deg: np.ndarray | None = None  # (P,) float64
 
 
 def _checksum_ok(match) -> bool:
@@ -86,11 +89,7 @@ def text_fixes(raw: bytes):
 
 
 def _local_ne(lat_deg, lon_deg):
-    lat0 = np.deg2rad(np.nanmean(lat_deg))
-    s2 = np.sin(lat0) ** 2
-    r_n = WGS84_A / np.sqrt(1 - WGS84_E2 * s2)
-    r_m = r_n * (1 - WGS84_E2) / (1 - WGS84_E2 * s2)
-    return np.deg2rad(lat_deg - np.nanmean(lat_deg)) * r_m, np.deg2rad(lon_deg - np.nanmean(lon_deg)) * r_n * np.cos(lat0)
+    return local_north_east_m(lat_deg, lon_deg, np.nanmean(lat_deg), np.nanmean(lon_deg))
 
 
 def _unique_increasing(t, *arrays):
@@ -110,12 +109,12 @@ def _track(t, lat, lon, course_deg, speed_m_s, source) -> GnssTrack:
         c = np.deg2rad(course_deg[vtg_ok])
         v = np.column_stack([speed_m_s[vtg_ok] * np.cos(c), speed_m_s[vtg_ok] * np.sin(c), np.full(c.size, np.nan)])
         tv = t[vtg_ok]
-        return GnssTrack(tv, v, np.column_stack([tv, tv]), source, "VTG speed and true course", int(t.size))
+        return GnssTrack(tv, v, np.column_stack([tv, tv]), source, "VTG speed and true course", int(t.size), t, lat, lon)
     n, e = _local_ne(lat, lon)
     dt = np.diff(t)
     v = np.column_stack([np.diff(n) / dt, np.diff(e) / dt, np.full(dt.size, np.nan)])
     return GnssTrack(0.5 * (t[1:] + t[:-1]), v, np.column_stack([t[:-1], t[1:]]), source,
-                     "differenced GGA positions (no VTG)", int(t.size))
+                     "differenced GGA positions (no VTG)", int(t.size), t, lat, lon)
 
 
 def read_track(raw: bytes, ds, coarse_offset_s: float, t_adcp0_utc_s: float) -> GnssTrack:

@@ -8,9 +8,11 @@ from the file's NMEA becomes the reference velocity with the clock offset applie
 
 from __future__ import annotations
 
+import datetime as dt
+
 import numpy as np
 
-from ..case import Attitude, Case, Environment, Instrument, Pings, Reference
+from ..case import Attitude, Case, Environment, Instrument, Pings, Position, Reference, format_utc
 from . import gnss, rdi_frames
 from .reader import ImportFailure, read_dolfyn
 from .window import Window, select
@@ -84,7 +86,7 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     c_sound = np.asarray(ds["c_sound"].values, dtype=np.float64)[keep]
     depth_ed = np.asarray(ds["depth"].values, dtype=np.float64)[keep] if "depth" in ds else np.zeros(keep.sum())
 
-    heading = np.mod(ang["heading"] + np.deg2rad(eb), 2 * np.pi)
+    heading = np.mod(ang["heading"], 2 * np.pi)  # EB is already in it (heading_settings_applied)
     pitch = rdi_frames.gimbal_pitch(ang["pitch"], ang["roll"]) if internal["pitch"] else ang["pitch"]
     roll = ang["roll"]
     zero = np.zeros_like(roll)
@@ -92,7 +94,7 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     rot = None
     if coord == "earth":
         rot = rdi_frames.rdi_matrix(heading, pitch if tilts else zero, roll if tilts else zero)
-        undone = "Earth -> instrument with M(heading + EB, pitch, roll)^T" + ("" if tilts else " (tilts off: P = R = 0)")
+        undone = "Earth -> instrument with M(heading, pitch, roll)^T" + ("" if tilts else " (tilts off: P = R = 0)")
     elif coord == "ship":
         rot = rdi_frames.rdi_matrix(np.full_like(roll, np.deg2rad(ea)), pitch if tilts else zero, roll if tilts else zero)
         undone = "ship -> instrument with M(EA, pitch, roll)^T (levelling and heading alignment)" + ("" if tilts else " (tilts off)")
@@ -130,6 +132,7 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
             "source_program": str(a.get("source_program") or "unknown"),
             "coordinate_system_found": coord, "transforms_undone": undone,
             "use_tilts_EX": int(tilts), "heading_alignment_EA_deg": ea, "heading_bias_EB_deg": eb,
+            **_heading_settings(ea, eb),
             "sensor_source_EZ_bits": src, "orientation": str(a.get("orientation")), "beam_pattern": "convex" if convex else "concave",
             "beam_mapping": "case beams 1,2,3,4 = RDI beams 4,3,2,1 (case x_t = RDI Y toward beam 3, y_t = RDI X, z_t = -Z)",
             "time_origin_adcp_clock": str(np.datetime64(int(round(t_abs[0] * 1e9)), "ns")),
@@ -145,7 +148,8 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
         "/attitude": {
             "frame_reason": f"EZ sensor source bits {src}: heading/pitch/roll internal = "
                             f"{int(internal['heading'])}/{int(internal['pitch'])}/{int(internal['roll'])}",
-            "heading_conversion": "case yaw = TRDI heading + EB, radians, clockwise from north (the instrument's reference)",
+            "heading_conversion": "case yaw = TRDI heading as recorded (it already holds EB), radians, clockwise from "
+                                  "north (the compass's reference: magnetic unless EB held the declination)",
             "pitch_conversion": "gimbal pitch atan(tan(tilt1) cos(tilt2)) (internal tilt sensor)" if internal["pitch"]
                                 else "as recorded (external sensor)",
             "roll_conversion": "as recorded; TRDI roll (starboard down positive) = case roll",
@@ -168,6 +172,37 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     return _with_reference(case, attrs, ds, path, t_abs)
 
 
+def _heading_settings(ea: float, eb: float) -> dict:
+    """What the file's heading settings did to the headings the case holds."""
+    return {
+        "heading_settings_applied": {
+            "heading_bias_EB_deg": eb, "EB_in_case_heading": True,
+            "heading_alignment_EA_deg": ea, "EA_in_case_heading": False,
+            "declination_in_case_heading_deg": eb, "magnetic_variation_in_file": False,
+        },
+        "heading_settings_note": (
+            f"EB = {eb:+.2f} deg (heading bias, the PD0's only heading correction: dolfyn's magnetic_var_deg) is "
+            "already in the recorded heading (TRDI's firmware applies it to the heading it records, as dolfyn reads "
+            "the PD0): the case heading is the recorded one, EB not added again, so any declination in the headings is "
+            f"EB's; EA = {ea:+.2f} deg (heading alignment of the head in the ship) is not in the heading: it only "
+            "turns ship coordinates and is undone with them. The PD0 holds no other magnetic variation (dolfyn exposes "
+            "none); one that WinRiver applied in its own processing lives in its measurement file, not in the PD0"),
+    }
+
+
+def _position(track, offset: float, t_abs, case: Case) -> tuple[Position | None, str]:
+    """GGA fixes on the case clock (float64) and the UTC of the clock's zero."""
+    origin = format_utc(dt.datetime.fromtimestamp(float(t_abs[0]) + offset, tz=dt.timezone.utc))
+    if track.fix_time_utc_s is None:
+        return None, origin
+    t = track.fix_time_utc_s - offset - t_abs[0]
+    keep = (t >= case.pings.time_s[0] - REFERENCE_MARGIN_S) & (t <= case.pings.time_s[-1] + REFERENCE_MARGIN_S)
+    if not keep.any():
+        return None, origin
+    return Position(time_s=t[keep], latitude_deg=np.asarray(track.latitude_deg, dtype=np.float64)[keep],
+                    longitude_deg=np.asarray(track.longitude_deg, dtype=np.float64)[keep]), origin
+
+
 def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dict]:
     """Attach the GNSS reference velocity when the file carries usable NMEA."""
     from ...estimators.asc import asc
@@ -179,10 +214,21 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
         track = gnss.read_track(raw, ds, coarse, float(t_abs[0]))
     except ValueError as exc:
         attrs["/provenance"]["gnss"] = f"none: {exc}"
+        attrs["/provenance"]["time_origin_utc_source"] = "none: no GNSS ties the ADCP clock to UTC (time_origin_utc absent)"
         return case, attrs
     v_bt = asc(case).vessel_velocity_m_s
     offset, peak, refined = gnss.refine_offset(track, t_abs, v_bt, coarse)
     stats = gnss.compare(track, offset, t_abs, v_bt)
+    position, origin = _position(track, offset, t_abs, case)
+    case = case.replace(position=position, time_origin_utc=origin)
+    attrs["/provenance"]["time_origin_utc_source"] = ("first ping's ADCP time stamp + clock_offset_s (GNSS UTC - ADCP "
+                                                      "clock)")
+    if position is not None:
+        attrs["/position"] = {
+            "source": f"{track.source} GGA fixes, float64 degrees (WGS84); time on the ADCP clock "
+                      "(GNSS UTC - clock_offset_s), fixes within 5 s of the selected pings",
+            "point": "the GNSS antenna (its position in the vessel is not in the file)",
+        }
     t_ref = track.time_utc_s - offset - t_abs[0]
     inside = (t_ref >= case.pings.time_s[0] - REFERENCE_MARGIN_S) & (t_ref <= case.pings.time_s[-1] + REFERENCE_MARGIN_S)
     vel = track.velocity_ned_m_s[inside].copy()

@@ -95,6 +95,18 @@ class Effect:
         """Velocity of the bottom under bottom tracking, (3,)."""
         return None
 
+    def bottom_velocity_at(self, t, position_ne_m, params: dict):
+        """Velocity of the bottom under each ping (n, 3), at transmit times t (n,) with G at
+        ``position_ne_m`` (n, 2: north, east in the run's site plane); default: the constant
+        :meth:`bottom_velocity`."""
+        v = self.bottom_velocity(params)
+        return None if v is None else np.broadcast_to(np.asarray(v, dtype=float), (np.size(t), 3))
+
+    def heading_correction(self, psi, params: dict):
+        """True minus read heading for true sensor headings psi (n,), or None when the
+        effect leaves the heading reading alone (true heading = read heading + this)."""
+        return None
+
     def wrap_attitude_sensor(self, read, params: dict):
         """``read(times) -> (n, 3) ypr`` of the sensor, wrapped by the effect."""
         return read

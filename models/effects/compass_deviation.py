@@ -28,5 +28,9 @@ class CompassDeviation(Effect):
             return ypr
         return deviated
 
+    def heading_correction(self, psi, params):
+        psi = np.asarray(psi, dtype=float)
+        return -(params["A_rad"] + params["B_rad"] * np.sin(psi) + params["C_rad"] * np.cos(psi))
+
     def heading_reading(self, psi, th):
         return psi + th[0] + th[1] * ca.sin(psi) + th[2] * ca.cos(psi)
