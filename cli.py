@@ -577,7 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("bench", help="benchmarks with their targets")
-    s.add_argument("suite", help="calibration | correction | formulations | solvers | scale")
+    s.add_argument("suite", help="calibration | correction | formulations | solvers | scale | survey")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results")
     s.set_defaults(func=cmd_bench)

@@ -648,9 +648,20 @@ class CalibrationProblem:
         return f"{span} over ground {', '.join(parts)} deg"
 
     def _declination(self) -> tuple[float | None, str]:
+        """The site's magnetic declination: given, else IGRF at each run's position and time (their
+        circular mean: one site), else unknown with the reason."""
+        from ..cases.site import case_declination
+
         if self.config.magnetic_declination_rad is not None:
             return float(self.config.magnetic_declination_rad), "given (CalibrationConfig.magnetic_declination_rad)"
-        return None, "not known: the cases carry no position and date, and none was given"
+        found = [case_declination(c) for c in self.cases]
+        values = [v for v, _ in found if v is not None]
+        if not values:
+            return None, found[0][1] + "; give --declination-deg to compare the misalignment with it"
+        mean = float(np.angle(np.mean(np.exp(1j * np.array(values)))))
+        note = found[0][1] if len(values) == 1 else (f"IGRF-14 over {len(values)} runs: {np.rad2deg(mean):+.2f} deg "
+                                                     f"(runs {np.rad2deg(min(values)):+.2f} to {np.rad2deg(max(values)):+.2f})")
+        return mean, note
 
     def _run_results(self, x, e, bed) -> list:
         u, model = self.model.unknowns, self.model

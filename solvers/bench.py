@@ -17,7 +17,7 @@ from ..models.rotations import course_difference_rad
 from .bench_common import machine as _machine
 from .bench_common import save_figure, write_json
 
-SUITES = ("calibration", "correction", "formulations", "solvers", "scale")
+SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey")
 
 
 def _calibrate(case, **kw):
@@ -302,6 +302,12 @@ def _suite(suite: str, quick: bool):
         from .bench_solvers import bench_solvers, figure_solvers, print_solvers
 
         return bench_solvers(starts=8, jit=not quick), print_solvers, figure_solvers
+    if suite == "survey":
+        from .bench_survey import bench_survey, figure_survey, print_survey
+
+        res = bench_survey([1, 2, 4] if quick else [1, 2, 3, 4, 5, 6], surveys=2 if quick else 10,
+                           coverage_seeds=10 if quick else 40)
+        return res, print_survey, figure_survey
     from .bench_scale import bench_scale, figure_scale, print_scale
 
     sizes = [100, 300, 1000, 3000, 10**4] if quick else [100, 300, 1000, 3000, 10**4, 3 * 10**4, 10**5]
