@@ -206,7 +206,8 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
         return case
     deviation = calibration.get("compass_deviation_rad") or {}
     psi = case.attitude.heading_rad
-    correction = compass_correction(psi, float(delta), float(deviation.get("sin") or 0.0), float(deviation.get("cos") or 0.0))
+    correction = compass_correction(psi, float(delta), *(float(deviation.get(k) or 0.0)
+                                                         for k in ("sin", "cos", "mean_sin", "mean_cos")))
     att = dataclasses.replace(case.attitude, heading_rad=psi + correction)
     return case.replace(attitude=att)
 

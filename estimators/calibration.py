@@ -121,10 +121,15 @@ class CalibrationConfig:
         shared by the runs) or ``section`` (a piecewise-linear function of the position along
         the section, ``moving_bed_section_knots`` values shared by the runs).
     compass_deviation : str
-        Head sensor against a moving reference: add the one-cycle deviation B sin psi + C cos psi
-        to the misalignment: ``auto`` (when the runs' headings span enough:
-        :func:`~adcpdyn.estimators.measurement_model.heading_span` >= ``MIN_HEADING_SPAN``),
-        ``on`` or ``off``.
+        Head sensor against a moving reference: the one-cycle deviation B sin psi + C cos psi on
+        top of the misalignment. ``auto``: estimated with the prior N(0,
+        ``compass_deviation_prior_rad``^2) on B and C, so where the runs' headings do not fix it
+        (one course, or two opposite ones, where it looks like a moving bed) the prior's width
+        enters the bed's and the misalignment's standard errors instead of being assumed zero;
+        where they span the compass the data dominate. ``on``: estimated without a prior (needs
+        headings all round); ``off``: left out (assumed zero).
+    compass_deviation_prior_rad : float
+        Standard deviation of the prior on B and C (a swung or calibrated compass: about 1 deg).
     standard_errors : str
         ``hac`` (Newey-West sandwich over each run's time bins, never below the white-noise
         SE: :mod:`.hac`) or ``white`` (the Gauss-Newton covariance alone).
@@ -160,6 +165,7 @@ class CalibrationConfig:
     moving_bed: str = "auto"
     moving_bed_section_knots: int = 3
     compass_deviation: str = "auto"
+    compass_deviation_prior_rad: float = float(np.deg2rad(1.0))
     standard_errors: str = "hac"
     magnetic_declination_rad: float | None = None
     solver: SolverOptions = field(default_factory=SolverOptions)
@@ -181,6 +187,9 @@ class CalibrationConfig:
                               ("standard_errors", SE_METHODS)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"CalibrationConfig.{name}: expected one of {list(allowed)}, got {getattr(self, name)!r}")
+        if not 0 < float(self.compass_deviation_prior_rad) <= 0.5:
+            raise ValueError(f"CalibrationConfig.compass_deviation_prior_rad: expected a width in (0, 0.5] rad, "
+                             f"got {self.compass_deviation_prior_rad!r}")
         if int(self.moving_bed_section_knots) < 2:
             raise ValueError(f"CalibrationConfig.moving_bed_section_knots: expected >= 2, got {self.moving_bed_section_knots}")
         if self.magnetic_declination_rad is not None and not abs(float(self.magnetic_declination_rad)) <= np.pi:
@@ -273,11 +282,13 @@ class CalibrationProblem:
         self.yaw_guess = course_offset_rad(runs) if self.head_yaw or (moving and installation == "estimate") else 0.0
         self.moving_bed = self._moving_bed_choice(moving)
         self.heading_span = heading_span(runs)
-        heading = "off"
+        heading, prior = "off", None
         if self.head_yaw:
-            deviation = config.compass_deviation == "on" or (config.compass_deviation == "auto"
-                                                              and self.heading_span >= MIN_HEADING_SPAN)
-            heading = "deviation" if deviation else "misalignment"
+            heading = "misalignment" if config.compass_deviation == "off" else "deviation"
+            prior = config.compass_deviation_prior_rad if config.compass_deviation == "auto" else None
+            if config.compass_deviation == "on" and self.heading_span < MIN_HEADING_SPAN:
+                raise ValueError(f"CalibrationConfig.compass_deviation: 'on' (no prior) needs headings all round the "
+                                 f"compass; these runs span {self.heading_span:.3f} < {MIN_HEADING_SPAN} (use 'auto')")
         elif config.compass_deviation == "on":
             raise ValueError("CalibrationConfig.compass_deviation: 'on' needs an attitude sensor in the head (frame "
                              "'transducer') and a moving reference; these cases have neither or not both")
@@ -287,7 +298,8 @@ class CalibrationProblem:
                          lever_box_m=self.lever_box, installation=installation,
                          installation_bound_rad=config.installation_bound_rad,
                          nominal_installation_ypr_rad=tuple(config.nominal_installation_ypr_rad),
-                         yaw_centre_rad=self.yaw_guess, heading=heading, moving_bed=self.moving_bed,
+                         yaw_centre_rad=self.yaw_guess, heading=heading, deviation_prior_rad=prior,
+                         moving_bed=self.moving_bed,
                          bed_knots=config.moving_bed_section_knots)
         self.model = model = SurveyModel(runs, spec)
         u = model.unknowns
@@ -526,10 +538,15 @@ class CalibrationProblem:
         confounded = self._confounding(unc, Q)
         for c in confounded:
             warn.append(c["statement"])
-        if self.head_yaw and deviation is None and cfg.compass_deviation == "auto":
-            se_info["compass_deviation"] = (f"not estimated: the runs' headings span too little (heading_span "
-                                            f"{self.heading_span:.3f} < {MIN_HEADING_SPAN}); a one-cycle deviation is then "
-                                            "part of the misalignment and the bed")
+        if deviation is not None and model.has_prior:
+            prior = cfg.compass_deviation_prior_rad
+            data_share = np.clip(1 - (deviation_se / prior) ** 2, 0, 1)
+            se_info["compass_deviation"] = {
+                "prior_sd_rad": prior, "heading_span": self.heading_span, "data_share": data_share.tolist(),
+                "note": (f"B and C carry the prior N(0, ({np.rad2deg(prior):.2f} deg)^2); the data fix "
+                         f"{100 * data_share.min():.0f}-{100 * data_share.max():.0f} % of their information (headings span "
+                         f"{self.heading_span:.3f}, 0.5 = all round); what the headings leave open enters the bed's and "
+                         "the misalignment's standard errors")}
         declination, declination_note = self._declination()
         runs = self._run_results(x, e, bed)
         for msg in warn:
@@ -554,6 +571,7 @@ class CalibrationProblem:
             attitude_source=", ".join(dict.fromkeys("samples" if r.attitude_source == "samples" else "model" for r in self.runs)),
             attitude_source_reason="; ".join(dict.fromkeys(r.attitude_reason for r in self.runs)),
             moving_bed=self.moving_bed, compass_deviation_rad=deviation, compass_deviation_se_rad=deviation_se,
+            compass_deviation_centre=model.heading_centre,
             magnetic_declination_rad=declination, magnetic_declination_note=declination_note,
             standard_errors=se_info, confounded=confounded, runs=runs, **bed["top"],
         )
@@ -566,7 +584,7 @@ class CalibrationProblem:
         if self.config.standard_errors == "white" or Q.size == 0:
             return white, info
         bins = {k: float(np.median(np.diff(run.case.pings.time_s))) for k, run in enumerate(self.runs)}
-        sw = sandwich(J, e, unc.cov_z[:, Q], self.model.row_run, self.model.row_time, bins)
+        sw = sandwich(J, e, unc.cov_z[:, Q], self.model.row_run, self.model.row_time, bins, known=self.model.prior_rows)
         d_w, d_h = np.diag(white), np.diag(sw.cov)
         ratio = np.sqrt(np.where(d_h > 0, np.maximum(1.0, d_w / np.where(d_h > 0, d_h, 1.0)), 1.0))
         cov = ratio[:, None] * sw.cov * ratio[None, :]
@@ -698,7 +716,7 @@ class CalibrationProblem:
         """Each group's noise level over all runs (RMS weighted by valid rows)."""
         model = self.model
         out = {}
-        for g in dict.fromkeys(key[1] for key in model.sigma_keys):
+        for g in dict.fromkeys(key[1] for key in model.sigma_keys if key[1] != "prior"):
             num = den = 0.0
             for i, key in enumerate(model.sigma_keys):
                 if key[1] == g:
@@ -709,7 +727,7 @@ class CalibrationProblem:
 
     def _pooled_chi2(self, e) -> dict:
         out = {}
-        for name in dict.fromkeys(c.name for c in self.model.channels):
+        for name in dict.fromkeys(c.name for c in self.model.channels if c.group != "prior"):
             num = den = 0.0
             for (k, n), s in self.model.channel_slices().items():
                 if n == name:

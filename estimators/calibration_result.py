@@ -132,8 +132,9 @@ class CalibrationResult:
     moving_bed_velocity_se_m_s: np.ndarray | None = None
     moving_bed_knots_m_s: np.ndarray | None = None  # (n, 2) section bed at positions linspace(0, 1, n)
     moving_bed_knots_se_m_s: np.ndarray | None = None
-    compass_deviation_rad: np.ndarray | None = None  # (B, C): B sin psi + C cos psi
+    compass_deviation_rad: np.ndarray | None = None  # (B, C): B (sin psi - mean_sin) + C (cos psi - mean_cos)
     compass_deviation_se_rad: np.ndarray | None = None
+    compass_deviation_centre: tuple = (0.0, 0.0)  # (mean_sin, mean_cos) of the headings the deviation was fitted on
     magnetic_declination_rad: float | None = None
     magnetic_declination_note: str = ""
     standard_errors: dict = field(default_factory=dict)
@@ -171,7 +172,8 @@ class CalibrationResult:
             "magnetic_declination_note": self.magnetic_declination_note,
             "compass_error_rad": self.compass_error_rad,
             "compass_deviation_rad": None if self.compass_deviation_rad is None else
-            dict(zip(("sin", "cos"), determined(self.compass_deviation_rad, self.compass_deviation_se_rad))),
+            {**dict(zip(("sin", "cos"), determined(self.compass_deviation_rad, self.compass_deviation_se_rad))),
+             "mean_sin": self.compass_deviation_centre[0], "mean_cos": self.compass_deviation_centre[1]},
             "compass_deviation_se_rad": None if self.compass_deviation_se_rad is None else
             dict(zip(("sin", "cos"), self.compass_deviation_se_rad.tolist())),
             "moving_bed": {"model": self.moving_bed},

@@ -64,7 +64,7 @@ def newey_west(series: np.ndarray, lags: int) -> np.ndarray:
 
 
 def sandwich(J, e: np.ndarray, P_q: np.ndarray, row_run: np.ndarray, row_time: np.ndarray,
-             bin_s: dict) -> Sandwich:
+             bin_s: dict, known: np.ndarray | None = None) -> Sandwich:
     """HAC covariance of the unknowns Q.
 
     Parameters
@@ -75,13 +75,20 @@ def sandwich(J, e: np.ndarray, P_q: np.ndarray, row_run: np.ndarray, row_time: n
     P_q : (n, q) columns Q of the white covariance P (its pseudo-inverse part).
     row_run, row_time : (m,) run index and time of each residual row.
     bin_s : {run: bin width in seconds} (e.g. the run's median ping interval).
+    known : (m,) bool, optional
+        Rows whose information is known rather than sampled (a prior's pseudo-residuals):
+        they add their expected meat (J_k P_q)^T (J_k P_q), not their one realisation.
     """
     e = np.asarray(e, dtype=float).ravel()
-    influence = np.asarray(J @ P_q) * e[:, None]  # (m, q): each row's pull on the unknowns Q
+    JP = np.asarray(J @ P_q)
+    influence = JP * e[:, None]  # (m, q): each row's pull on the unknowns Q
     q = P_q.shape[1]
     cov = np.zeros((q, q))
+    known = np.zeros(e.size, dtype=bool) if known is None else np.asarray(known, dtype=bool)
+    if known.any():
+        cov += JP[known].T @ JP[known]
     lags, rhos, counts = [], [], []
-    for run in np.unique(row_run):
+    for run in np.unique(row_run[~known]):
         rows = np.flatnonzero(row_run == run)
         t = row_time[rows]
         width = float(bin_s[int(run)])

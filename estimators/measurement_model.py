@@ -7,7 +7,8 @@ Calibration and diagnosis both pose their NLPs on it. Unknowns, in blocks owned 
   (:mod:`.formulations`), the installation angles (vessel-frame sensor; a head sensor
   cannot see them), the heading correction of a head sensor against a moving reference
   (misalignment: compass error plus declination; optionally the one-cycle deviation
-  B sin psi + C cos psi, :func:`~adcpdyn.models.sensors.compass_correction`);
+  B (sin psi - mean) + C (cos psi - mean), :func:`~adcpdyn.models.sensors.compass_correction`,
+  with a prior on B and C so that what the headings leave open is carried, not assumed zero);
 * shared by the runs of one site: the moving-bed velocity (north, east), constant or a
   piecewise-linear function of the position along the section;
 * per run: the attitude model of the sensor (or none: the sensor's samples, or a model
@@ -286,7 +287,10 @@ class ModelSpec:
     ``installation``: ``estimate`` (vessel-frame sensor; box of +-``installation_bound_rad``
     about (``yaw_centre_rad``, 0, 0)), ``fixed`` (at ``nominal_installation_ypr_rad``) or
     ``head`` (sensor in the head: beams in the head frame, angles unseen).
-    ``heading``: ``off``, ``misalignment`` or ``deviation`` (misalignment plus B, C).
+    ``heading``: ``off``, ``misalignment`` or ``deviation`` (misalignment plus B, C); with
+    ``deviation_prior_rad`` the deviation terms get a Gaussian prior N(0, prior^2) each (two
+    pseudo-residual rows): what the headings do not fix comes from the prior, and its
+    uncertainty reaches what it is confounded with (the bed, on two opposite courses).
     """
 
     formulation: str = "exact"
@@ -298,6 +302,7 @@ class ModelSpec:
     nominal_installation_ypr_rad: tuple = (0.0, 0.0, 0.0)
     yaw_centre_rad: float = 0.0
     heading: str = "off"
+    deviation_prior_rad: float | None = None
     moving_bed: str = "off"
     bed_knots: int = 3
 
@@ -378,6 +383,8 @@ class SurveyModel:
             vk = u.add(f"velocity{k}", [f"{prefix}V{j}_{a}" for j in range(K) for a in AXES], speed, -20.0, 20.0)
             self.knot_syms.append(ca.reshape(vk, 3, K).T)
         self.x = u.x
+        # the deviation is written about the survey's mean heading, so h[0] is the mean correction over it
+        self.heading_centre = heading_centre(runs) if spec.heading == "deviation" else (0.0, 0.0)
         self.attitude_sensor = [self._attitude_function(run, False) for run in runs]  # the sensor's readings
         self.attitude_true = [self._attitude_function(run, True) for run in runs]  # heading corrected: the beams'
         self._build_residuals()
@@ -385,7 +392,7 @@ class SurveyModel:
     # ------------------------------------------------------------------ residuals
     def _attitude_function(self, run: RunSetup, corrected: bool) -> ca.Function:
         base = local_attitude_function() if run.attitude_source == "samples" else attitude_function(run.fit.params.layout)
-        return heading_corrected_function(base) if corrected and self.heading is not None else base
+        return heading_corrected_function(base, *self.heading_centre) if corrected and self.heading is not None else base
 
     def _p_rows(self, k: int, times) -> ca.MX:
         """Attitude parameters for rows at ``times`` (columns), with the heading correction appended."""
@@ -464,6 +471,9 @@ class SurveyModel:
                     models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
                     channels.append(Channel(k, f"reference_{NED[j]}", t_ref, np.isfinite(v_meas[:, j]).astype(float)))
                 n_nodes += att_c.n_instructions() * L
+        if self.has_prior:  # N(0, prior^2) on B and C: a pseudo-run of its own, outside the runs' time bins
+            models.append(self.heading[1:3])
+            channels.append(Channel(len(self.runs), "prior_compass_deviation", np.zeros(2), np.ones(2)))
         self.raw = ca.vertcat(*models)
         self.channels = channels
         self.sigma_keys = list(dict.fromkeys((c.run, c.group) for c in channels))  # (run, group), in order
@@ -486,6 +496,15 @@ class SurveyModel:
         return ca.Function("reference_velocity", [v, dLam],
                            [reference_point_velocity(v, dLam, ca.DM(self.reference_point_sensor(case)))])
 
+    @property
+    def has_prior(self) -> bool:
+        return self.spec.heading == "deviation" and self.spec.deviation_prior_rad is not None
+
+    @property
+    def prior_rows(self) -> np.ndarray:
+        """Mask of the prior's pseudo-residual rows (their information is known, not sampled)."""
+        return self.row_run == len(self.runs)
+
     # ------------------------------------------------------------------ bookkeeping
     def channel_slices(self) -> dict:
         """Slice of each channel in the stacked residuals, keyed by (run, name)."""
@@ -500,6 +519,8 @@ class SurveyModel:
             for key in self.sigma_keys:
                 if key[0] == k:
                     out[key] = guess.get(key[1], 0.02)
+        if self.has_prior:
+            out[(len(self.runs), "prior")] = float(self.spec.deviation_prior_rad)
         return out
 
     def weights(self, sigma: dict) -> np.ndarray:
@@ -511,6 +532,8 @@ class SurveyModel:
         dof = max(1.0 - n_unknowns / max(float(self.mask.sum()), 1.0), 0.1)
         out = dict(sigma)
         for i, key in enumerate(self.sigma_keys):
+            if key[1] == "prior":  # a prior's width is stated, not estimated
+                continue
             m = (self.row_sigma == i) & (self.mask > 0)
             if m.sum() > 3:
                 out[key] = float(max(np.sqrt(np.sum(raw[m] ** 2) / (m.sum() * dof)), 1e-6))
@@ -608,6 +631,11 @@ class SurveyModel:
                 blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), np.vstack([t_ref[None, :], local(t_ref)]),
                                        offset, velocity_basis=basis(t_ref), shared_index=idx, knot_columns=knots_cols))
                 offset += 3 * t_ref.size
+        if self.has_prior:
+            d, v, s = ca.SX.sym("d", 1), ca.SX.sym("v", 3), ca.SX.sym("s", 2)
+            blocks.append(RowBlock(ca.Function("prior_rows", [d, v, s], [s]), np.zeros((1, 1)), offset,
+                                   shared_index=index["heading"][1:3]))
+            offset += 2
         if offset != self.raw.shape[0]:
             raise RuntimeError(f"assembled Jacobian: {offset} rows, residuals have {self.raw.shape[0]}")
         return RowJacobian(z, shared_z, blocks, self.raw.shape[0], None, u.scale, threads=threads)
@@ -668,6 +696,12 @@ def course_offset_rad(runs: list[RunSetup]) -> float:
     if not diffs or np.concatenate(diffs).size < 3:
         return 0.0
     return float(np.angle(np.mean(np.exp(1j * np.concatenate(diffs)))))
+
+
+def heading_centre(runs: list[RunSetup]) -> tuple[float, float]:
+    """Mean sine and cosine of the sensor heading over every run's attitude samples."""
+    psi = np.concatenate([r.case.attitude.heading_rad[np.isfinite(r.case.attitude.heading_rad)] for r in runs])
+    return (float(np.mean(np.sin(psi))), float(np.mean(np.cos(psi)))) if psi.size else (0.0, 0.0)
 
 
 def heading_span(runs: list[RunSetup]) -> float:

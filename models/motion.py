@@ -303,36 +303,43 @@ class SampledAttitude:
 HEADING_CORRECTION_SIZE = 3  # misalignment, deviation B (sin), deviation C (cos)
 
 
-def heading_corrected_function(attitude_fun: ca.Function, sym=ca.SX) -> ca.Function:
+def heading_corrected_function(attitude_fun: ca.Function, mean_sin: float = 0.0, mean_cos: float = 0.0,
+                               sym=ca.SX) -> ca.Function:
     """An attitude model whose heading is the sensor's corrected to true north:
     ``attitude(t, [p; h]) -> (ypr, Lambda, dLambda_dt, Omega, omega)`` with
-    h = (misalignment, B, C) and yaw = psi_s + :func:`~adcpdyn.models.sensors.compass_correction`.
+    h = (misalignment, B, C) and yaw = psi_s + delta, delta the
+    :func:`~adcpdyn.models.sensors.compass_correction` (deviation about the headings' mean sine
+    and cosine ``mean_sin``, ``mean_cos``). Same signature as ``attitude_fun``, so every model
+    that takes an attitude Function takes this one.
 
-    ``ypr`` is the true attitude; dLambda/dt is differentiated through the correction, so the
-    rates are those of the true heading (psi_s (1 + dcorrection/dpsi_s)). Same signature as
-    ``attitude_fun``, so every model that takes an attitude Function takes this one.
+    Lambda = Rz(delta) Lambda_s exactly (a yaw offset of Eq. 7), and dLambda/dt = Rz(delta)
+    dLambda_s/dt: a compass error turns the measured rotation, it is no rotation itself. (The
+    correction's own rate, delta'(psi) dpsi/dt, is a percent of the yaw rate per degree of
+    deviation; left in, it would make the deviation a free yaw-rate scale that soaks up any
+    rate misfit.)
     """
     from .sensors import compass_correction
 
     t = sym.sym("t")
     p = sym.sym("p", attitude_fun.size_in(1))
     h = sym.sym("h", HEADING_CORRECTION_SIZE)
-    ypr_s = attitude_fun(t, p)[0]
-    ypr = ca.vertcat(ypr_s[0] + compass_correction(ypr_s[0], h[0], h[1], h[2]), ypr_s[1], ypr_s[2])
-    return _attitude_from_ypr(t, ca.vertcat(p, h), ypr, [t, p, h])
+    ypr_s, Lam_s, dLam_s, _, _ = attitude_fun(t, p)
+    delta = compass_correction(ypr_s[0], h[0], h[1], h[2], mean_sin, mean_cos)
+    Rz = euler_matrix(delta, 0, 0)
+    Lam, dLam = ca.mtimes(Rz, Lam_s), ca.mtimes(Rz, dLam_s)
+    Omega = ca.mtimes(dLam, Lam.T)
+    inner = ca.Function("attitude_corrected", [t, p, h], [ca.vertcat(ypr_s[0] + delta, ypr_s[1], ypr_s[2]), Lam, dLam,
+                                                           Omega, unskew(Omega)])
+    t2, p2 = sym.sym("t"), sym.sym("p", p.shape[0] + HEADING_CORRECTION_SIZE)
+    outputs = inner(t2, p2[:p.shape[0]], p2[p.shape[0]:])
+    return ca.Function("attitude", [t2, p2], outputs, ["t", "p"], ["ypr", "Lambda", "dLambda_dt", "Omega", "omega"])
 
 
-def _attitude_from_ypr(t, p, ypr, inputs=None) -> ca.Function:
+def _attitude_from_ypr(t, p, ypr) -> ca.Function:
     Lam = euler_matrix(ypr[0], ypr[1], ypr[2])
     dLam = ca.reshape(ca.jacobian(ca.vec(Lam), t), 3, 3)
     Omega = ca.mtimes(dLam, Lam.T)
     omega = unskew(Omega)
-    if inputs is not None:  # p was assembled from several symbols: a Function takes purely symbolic inputs
-        inner = ca.Function("attitude_inner", inputs, [ypr, Lam, dLam, Omega, omega])
-        t2, p2 = type(t).sym("t"), type(t).sym("p", p.shape[0])
-        parts = ca.vertsplit(p2, [0] + list(np.cumsum([i.shape[0] for i in inputs[1:]])))
-        ypr, Lam, dLam, Omega, omega = inner(t2, *parts)
-        t, p = t2, p2
     return ca.Function(
         "attitude",
         [t, p],

@@ -31,15 +31,17 @@ def reference_point_velocity(vessel_velocity, dLam, point_body_m):
     return vessel_velocity + ca.mtimes(dLam, ca.reshape(point_body_m, 3, 1))
 
 
-def compass_correction(heading, misalignment, deviation_sin=0.0, deviation_cos=0.0):
+def compass_correction(heading, misalignment, deviation_sin=0.0, deviation_cos=0.0, mean_sin=0.0, mean_cos=0.0):
     """Heading correction of a compass: true heading = sensor heading + this.
 
-    A constant misalignment (declination not set, hard-iron offset, a head turned on its
-    mount) plus the one-cycle deviation B sin psi + C cos psi of the sensor heading psi.
+    misalignment + B (sin psi - mean_sin) + C (cos psi - mean_cos): a constant (declination not
+    set, hard-iron offset, a head turned on its mount) plus the one-cycle deviation of the
+    sensor heading psi, written about the mean (sin, cos) of the headings it was fitted on, so
+    that the misalignment is the mean correction over them (what those headings determine).
     Works on numbers and on CasADi expressions.
     """
     sin, cos = (ca.sin, ca.cos) if isinstance(heading, (ca.SX, ca.MX)) else (np.sin, np.cos)
-    return misalignment + deviation_sin * sin(heading) + deviation_cos * cos(heading)
+    return misalignment + deviation_sin * (sin(heading) - mean_sin) + deviation_cos * (cos(heading) - mean_cos)
 
 
 def irregular_times(rng: np.random.Generator, t_start: float, t_end: float, interval_min_s: float, interval_max_s: float) -> np.ndarray:

@@ -305,3 +305,30 @@ def test_local_attitude_is_the_samples_linear_interpolation():
         if h > 1e-9:
             fd = (np.asarray(f(t + h, P[:, k])[1]) - np.asarray(f(t - h, P[:, k])[1])) / (2 * h)
             assert np.allclose(np.asarray(out[2]), fd, atol=1e-7)
+
+
+def test_heading_correction_is_a_yaw_offset_and_turns_the_rotation():
+    """A constant misalignment d is the model with its yaw shifted by d (Eq. 7: Rz(psi + d) =
+    Rz(d) Rz(psi)): Lambda and dLambda/dt equal to round-off. With a deviation B, C the Earth
+    angular velocity is the sensor's turned by Rz(delta), its length unchanged, and delta is
+    compass_correction at the sensor heading."""
+    from adcpdyn.models.motion import heading_corrected_function, local_attitude_function
+    from adcpdyn.models.sensors import compass_correction
+
+    f = local_attitude_function()
+    g = heading_corrected_function(f, mean_sin=0.3, mean_cos=-0.2)
+    p = np.array([0.0, 1.0, 0.1, 0.2, 0.3, 0.01, 0.02])
+    shifted = p.copy()
+    shifted[1] += 0.2
+    out, ref = g(0.5, np.r_[p, 0.2, 0.0, 0.0]), f(0.5, shifted)
+    for k in (1, 2):
+        assert np.max(np.abs(np.asarray(out[k] - ref[k]))) < 1e-14
+    h = np.array([0.2, 0.03, -0.02])
+    out, sensor = g(0.5, np.r_[p, h]), f(0.5, p)
+    psi = float(sensor[0][0])
+    delta = compass_correction(psi, *h, 0.3, -0.2)
+    assert float(out[0][0]) == pytest.approx(psi + delta, abs=1e-14)
+    assert delta == pytest.approx(0.2 + 0.03 * (np.sin(psi) - 0.3) - 0.02 * (np.cos(psi) + 0.2), abs=1e-15)
+    w, w_s = np.asarray(out[4]).ravel(), np.asarray(sensor[4]).ravel()
+    Rz = np.array([[np.cos(delta), -np.sin(delta), 0], [np.sin(delta), np.cos(delta), 0], [0, 0, 1]])
+    assert np.allclose(w, Rz @ w_s, atol=1e-14)
