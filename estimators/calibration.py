@@ -404,25 +404,8 @@ class CalibrationProblem:
         return dataclasses.replace(p, modes=modes)
 
     def _x_from(self, params: list, angles, centre) -> np.ndarray:
-        """A full start vector: each run's attitude model, the angles or misalignment, the lever
-        arms of a head centred at ``centre``, a fixed bed, each run's reference velocities."""
-        u, model = self.model.unknowns, self.model
-        x = np.zeros(len(self.names))
-        for k, (run, p) in enumerate(zip(self.runs, params)):
-            if run.attitude_source == "model":
-                x[u.index(f"attitude{k}")] = p.pack()
-            if run.knots is not None:
-                x[u.index(f"velocity{k}")] = model.velocity_guess(k).reshape(-1)
         angles = np.asarray(angles, dtype=float)
-        if self.head_yaw:
-            x[u.index("heading")[0]] = angles[0]
-        elif not self.fixed_installation and not self.head_sensor:
-            x[u.index("installation")] = angles
-        if self.two_stage and not self.head_sensor:
-            angles = np.asarray(self.config.nominal_installation_ypr_rad, dtype=float)
-        Lst = np.asarray(euler_matrix(*angles)) if not self.head_sensor else np.eye(3)
-        x[u.index("lever")] = model.lever.initial(centre, Lst, model.pos_t)
-        return x
+        return self.model.initial_x(params, angles, centre, heading_guess=float(angles[0]))
 
     # ------------------------------------------------------------------ solve
     def solve(self) -> CalibrationResult:
@@ -735,12 +718,6 @@ class CalibrationProblem:
                     num, den = num + float(np.sum(e[s][m] ** 2)), den + float(m.sum())
             out[name] = num / max(den, 1.0)
         return out
-
-
-def channel_slices(channels: list[tuple[str, int]]) -> dict:
-    """Slice of each channel in the stacked residual vector, from (name, length) in stacking order."""
-    ends = np.cumsum([n for _, n in channels])
-    return {ch: slice(int(end - n), int(end)) for (ch, n), end in zip(channels, ends)}
 
 
 def calibrate(case: Case, config: CalibrationConfig | None = None) -> CalibrationResult:

@@ -38,9 +38,10 @@ from ..models.janus import beam_to_instrument
 from ..models.kinematics import centre_of_rotation_depth
 from ..models.measurement import bottom_track_function
 from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE, AttitudeParams, SampledAttitude,
-                             attitude_function, heading_corrected_function, local_attitude_function)
-from ..models.rotations import course_difference_rad, euler_matrix
-from ..models.sensors import reference_point_velocity
+                             attitude_function, evaluate_attitude, heading_corrected_function, local_attitude_function,
+                             with_extra_mode)
+from ..models.rotations import course_difference_rad, euler_matrix, unskew
+from ..models.sensors import compass_correction, reference_point_velocity
 from .attitude_fit import AttitudeFit
 from .formulations import AXES, lever_block
 from .row_jacobian import RowBlock, RowJacobian
@@ -53,6 +54,20 @@ ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
 HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
 BED_SCALE_M_S = 0.05
 REFERENCE_MARGIN_KNOTS = 1.0  # reference samples kept up to this many knot intervals beyond the pings
+
+
+def channel_slices(channels: list[tuple[str, int]]) -> dict:
+    """Slice of each channel in the stacked residual vector, from (name, length) in stacking order."""
+    ends = np.cumsum([n for _, n in channels])
+    return {ch: slice(int(end - n), int(end)) for (ch, n), end in zip(channels, ends)}
+
+
+def _reference_velocity() -> ca.Function:
+    v, dLam, p = ca.SX.sym("v_a", 3), ca.SX.sym("dLambda", 3, 3), ca.SX.sym("p", 3)
+    return ca.Function("reference_velocity", [v, dLam, p], [reference_point_velocity(v, dLam, p)])
+
+
+REFERENCE_VELOCITY = _reference_velocity()  # (v_a, dLambda/dt, body point in the sensor frame) -> its velocity
 
 
 def hat_basis(times, knots) -> np.ndarray:
@@ -195,6 +210,7 @@ class RunSetup:
     reference_rows: np.ndarray | None
     attitude_reason: str = ""
     section_position: np.ndarray | None = None
+    sample_shift_s: float = 0.0  # rows take the samples' segment about t + shift (a latency's current estimate)
     samples: SampledAttitude | None = field(default=None, init=False)
 
     def __post_init__(self):
@@ -281,6 +297,39 @@ def section_positions(runs: list[RunSetup]) -> None:
 
 
 @dataclass(frozen=True)
+class EffectTerm:
+    """An effect of the catalog (:mod:`adcpdyn.models.effects`) in the model: shared by every run
+    (``run`` None: compass, beam angles, sound speed, latency, lever arms) or one run's own
+    (moving bed, heave, forced roll)."""
+
+    effect: object
+    run: int | None = None
+
+
+class EffectContext:
+    """The numbers of one run the effects' symbolic hooks need (times, heading directions,
+    residual peaks that seed an oscillation's frequency)."""
+
+    def __init__(self, run: RunSetup, peaks: dict | None = None):
+        case = run.case
+        self.case = case
+        self.ping_time_s = case.pings.time_s
+        self.reference_time_s = run.reference_time_s if run.moving_reference else None
+        times = [self.ping_time_s] + ([self.reference_time_s] if self.reference_time_s is not None else [])
+        self.t0_s = float(min(t[0] for t in times))
+        self.t1_s = float(max(t[-1] for t in times))
+        self.peaks = peaks or {}
+        psi = lambda t: (run.samples.heading_at(t) if run.samples is not None
+                         else evaluate_attitude(run.fit.params, t)["ypr"][:, 0])
+        unit = lambda a: ca.DM(np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]))
+        self.heading_dir_ping = unit(psi(self.ping_time_s))
+        self.heading_dir_reference = unit(psi(self.reference_time_s)) if self.reference_time_s is not None else None
+
+    def residual_peak(self, key: str) -> float:
+        return float(self.peaks.get(key, 1.0))
+
+
+@dataclass(frozen=True)
 class ModelSpec:
     """What the survey model contains (decided from the configuration and the data).
 
@@ -305,6 +354,7 @@ class ModelSpec:
     deviation_prior_rad: float | None = None
     moving_bed: str = "off"
     bed_knots: int = 3
+    min_decay_1_s: float = 0.0  # lower bound of the modes' decay (the diagnosis's base: free decays only)
 
 
 class SurveyModel:
@@ -316,7 +366,7 @@ class SurveyModel:
     reported), ``heading`` (h), ``bed`` (bed parameters (n, 2)), ``assembled_nodes``.
     """
 
-    def __init__(self, runs: list[RunSetup], spec: ModelSpec):
+    def __init__(self, runs: list[RunSetup], spec: ModelSpec, effects=(), peaks: dict | None = None):
         if not runs:
             raise ValueError("runs: expected at least one run")
         self.runs, self.spec = runs, spec
@@ -333,7 +383,7 @@ class SurveyModel:
         self.attitude_syms: list = []
         for k, run in enumerate(runs):  # per-run attitude first: their blocks lead the vector, as before
             if run.attitude_source == "model":
-                names, scale, lo, hi = attitude_bounds(run.fit.params)
+                names, scale, lo, hi = attitude_bounds(run.fit.params, min_decay=spec.min_decay_1_s)
                 prefix = f"run{k + 1}/" if len(runs) > 1 else ""
                 self.attitude_syms.append(u.add(f"attitude{k}", [prefix + n for n in names], scale, lo, hi))
             elif run.attitude_source == "frozen":
@@ -371,6 +421,20 @@ class SurveyModel:
             names = [f"moving_bed_{a}" for a in NED[:2]] if n_bed == 1 else \
                 [f"moving_bed{j + 1}_{a}" for j in range(n_bed) for a in NED[:2]]
             self.bed = ca.reshape(u.add("moving_bed", names, BED_SCALE_M_S, -3.0, 3.0), 2, n_bed).T  # (n_bed, 2)
+        # ---- effects of the catalog (the diagnosis), each with its unknowns
+        self.effect_terms = []
+        for i, term in enumerate(effects):
+            e = term.effect
+            if term.run is not None and not 0 <= term.run < len(runs):
+                raise ValueError(f"effects: {e.name}: run {term.run} is not one of the {len(runs)} runs")
+            if runs[term.run or 0].attitude_source == "samples" and e.needs_motion_model:
+                raise ValueError(f"effect {e.name}: acts on the motion model only; the beams use the sensor's samples here")
+            prefix = f"run{term.run + 1}/" if term.run is not None and len(runs) > 1 else ""
+            th = (u.add(f"effect{i}", [f"{prefix}{e.name}.{p.name}" for p in e.parameters], [p.scale for p in e.parameters],
+                        [p.lower for p in e.parameters], [p.upper for p in e.parameters])
+                  if e.parameters else ca.MX(0, 1))
+            self.effect_terms.append((term, th))
+        self.contexts = [EffectContext(run, peaks) for run in runs]
         # ---- per-run navigation knots (last: the assembled Jacobian finds them by block)
         self.knot_syms = []
         for k, run in enumerate(runs):
@@ -385,23 +449,71 @@ class SurveyModel:
         self.x = u.x
         # the deviation is written about the survey's mean heading, so h[0] is the mean correction over it
         self.heading_centre = heading_centre(runs) if spec.heading == "deviation" else (0.0, 0.0)
-        self.attitude_sensor = [self._attitude_function(run, False) for run in runs]  # the sensor's readings
-        self.attitude_true = [self._attitude_function(run, True) for run in runs]  # heading corrected: the beams'
+        self.attitude_params, self.attitude_layouts = [], []  # per run: the motion model with the effects' extra modes
+        for k, run in enumerate(runs):
+            p, lay = self.attitude_syms[k], run.fit.params.layout
+            for e, th in self.terms_of(k):
+                extra = e.extra_mode(th)
+                if extra is not None:
+                    p, lay = with_extra_mode(p, lay, *extra)
+            self.attitude_params.append(p)
+            self.attitude_layouts.append(lay)
+        self.attitude_sensor = [local_attitude_function() if run.attitude_source == "samples" else
+                                attitude_function(self.attitude_layouts[k]) for k, run in enumerate(runs)]
+        self.attitude_true = [self._true_attitude_function(k) for k in range(len(runs))]  # the beams'
         self._build_residuals()
 
     # ------------------------------------------------------------------ residuals
-    def _attitude_function(self, run: RunSetup, corrected: bool) -> ca.Function:
-        base = local_attitude_function() if run.attitude_source == "samples" else attitude_function(run.fit.params.layout)
-        return heading_corrected_function(base, *self.heading_centre) if corrected and self.heading is not None else base
+    def terms_of(self, k: int) -> list:
+        """(effect, its unknowns) of the effects acting on run k."""
+        return [(term.effect, th) for term, th in self.effect_terms if term.run is None or term.run == k]
+
+    def _sample_terms(self, k: int) -> list:
+        return [(e, th) for e, th in self.terms_of(k) if e.acts_on_samples] if self.runs[k].attitude_source == "samples" else []
+
+    def _true_attitude_function(self, k: int) -> ca.Function:
+        """The beams' attitude of run k, ``(t, p_row) -> (ypr, Lambda, dLambda_dt, Omega, omega)``: the
+        motion model (heading corrected), or the sensor's samples with the heading correction and
+        the sensor effects undone on them; p_row as :meth:`_p_rows` stacks it."""
+        run = self.runs[k]
+        if run.attitude_source != "samples":
+            base = attitude_function(self.attitude_layouts[k])
+            return heading_corrected_function(base, *self.heading_centre) if self.heading is not None else base
+        terms = self._sample_terms(k)
+        t, p = ca.SX.sym("t"), ca.SX.sym("p", LOCAL_ATTITUDE_SIZE)
+        h = ca.SX.sym("h", HEADING_CORRECTION_SIZE if self.heading is not None else 0)
+        ths = [ca.SX.sym(f"th{i}", th.shape[0]) for i, (_, th) in enumerate(terms)]
+        tq = t
+        for (e, _), th in zip(terms, ths):
+            tq = e.sampled_time(tq, th)
+        ypr = p[1:4] + p[4:7] * (tq - p[0])
+        tilt = ypr[1:3]
+        for (e, _), th in zip(terms, ths):
+            tilt = e.sampled_tilt(tilt, p[5:7], th)
+        ypr_s = ca.vertcat(ypr[0], tilt)
+        Lam_s = euler_matrix(ypr_s[0], ypr_s[1], ypr_s[2])
+        dLam_s = ca.reshape(ca.jacobian(ca.vec(Lam_s), t), 3, 3)
+        delta = compass_correction(ypr_s[0], h[0], h[1], h[2], *self.heading_centre) if self.heading is not None else 0
+        for (e, _), th in zip(terms, ths):
+            delta = delta + e.sampled_heading_correction(ypr_s[0], th)
+        Rz = euler_matrix(delta, 0, 0)
+        Lam, dLam = ca.mtimes(Rz, Lam_s), ca.mtimes(Rz, dLam_s)  # a heading error turns the rotation (motion.heading_corrected_function)
+        Omega = ca.mtimes(dLam, Lam.T)
+        P = ca.vertcat(p, h, *ths)
+        return ca.Function("attitude", [t, P], [ca.vertcat(ypr_s[0] + delta, tilt), Lam, dLam, Omega, unskew(Omega)],
+                           ["t", "p"], ["ypr", "Lambda", "dLambda_dt", "Omega", "omega"])
 
     def _p_rows(self, k: int, times) -> ca.MX:
-        """Attitude parameters for rows at ``times`` (columns), with the heading correction appended."""
+        """Attitude parameters of the beams' attitude (:meth:`_true_attitude_function`) for rows at
+        ``times`` (columns): the model's, or each row's sample segment; then the heading correction
+        and the sample effects' unknowns."""
         run = self.runs[k]
+        extra = ([self.heading] if self.heading is not None else []) + [th for _, th in self._sample_terms(k)]
         if run.attitude_source == "samples":
-            p = ca.MX(ca.DM(run.samples.params_at(times)))
-            return ca.vertcat(p, ca.repmat(self.heading, 1, len(times))) if self.heading is not None else p
-        p = self.attitude_syms[k]
-        return ca.vertcat(p, self.heading) if self.heading is not None else p
+            # the segment about t + shift (its own clock: a latency th then evaluates it at t + th)
+            p = ca.MX(ca.DM(run.samples.params_at(np.asarray(times) + run.sample_shift_s)))
+            return ca.vertcat(p, *[ca.repmat(x, 1, len(times)) for x in extra]) if extra else p
+        return ca.vertcat(self.attitude_params[k], *extra)
 
     def bed_at(self, k: int, n: int):
         """Moving-bed velocity (n, 3) under run k's pings (zeros without a bed model)."""
@@ -428,29 +540,50 @@ class SurveyModel:
             case, pings = run.case, run.case.pings
             N = pings.n
             att, att_c = self.attitude_sensor[k], self.attitude_true[k]
-            if run.attitude_source == "model":  # the sensor's own readings: uncorrected model
+            terms, ctx = self.terms_of(k), self.contexts[k]
+            if run.attitude_source == "model":  # the sensor's own readings of the motion model (and its faults)
                 a = case.attitude
                 M = a.time_s.size
-                ypr_model = att.map(M)(ca.DM(a.time_s).T, self.attitude_syms[k])[0]
+                t_att = ca.DM(a.time_s).T
+                p_full, p_tilt = self.attitude_params[k], self.attitude_params[k]
+                for e, th in terms:
+                    t_att, p_tilt = e.attitude_time(t_att, th), e.tilt_attitude_params(p_tilt, self.attitude_layouts[k], th)
+                ypr_model = att.map(M)(t_att, p_full)[0]
+                tilt_model = att.map(M)(t_att, p_tilt)[0] if p_tilt is not p_full else ypr_model
+                psi = ca.transpose(ypr_model[0, :])
+                for e, th in terms:
+                    psi = e.heading_reading(psi, th)
                 ypr_meas = a.ypr()
-                dpsi = np.nan_to_num(ypr_meas[:, 0]) - ca.transpose(ypr_model[0, :])
-                models += [ca.atan2(ca.sin(dpsi), ca.cos(dpsi)), ca.transpose(ypr_model[1, :]) - np.nan_to_num(ypr_meas[:, 1]),
-                           ca.transpose(ypr_model[2, :]) - np.nan_to_num(ypr_meas[:, 2])]
+                dpsi = np.nan_to_num(ypr_meas[:, 0]) - psi
+                models += [ca.atan2(ca.sin(dpsi), ca.cos(dpsi)), ca.transpose(tilt_model[1, :]) - np.nan_to_num(ypr_meas[:, 1]),
+                           ca.transpose(tilt_model[2, :]) - np.nan_to_num(ypr_meas[:, 2])]
                 channels += [Channel(k, n, a.time_s, np.isfinite(ypr_meas[:, j]).astype(float))
                              for j, n in enumerate(("heading", "pitch", "roll"))]
                 n_nodes += att.n_instructions() * M
-            bt_fun = bottom_track_function(att_c, run.timing, self.spec.tangential)
+            timing = "deep" if any(e.timing == "deep" for e, _ in terms) and run.timing == "shallow" else run.timing
+            bt_fun = bottom_track_function(att_c, timing, self.spec.tangential)
             self.bt_functions.append(bt_fun)
             depth = case.environment.depth_at_pings(N)
             g_depth = centre_of_rotation_depth(case.environment.transducer_depth_m, self.r)
             self.g_depth.append(g_depth)
             V = self.knot_syms[k]
             v_ping = ca.mtimes(ca.DM(hat_basis(pings.time_s, run.knots)), V) if V is not None else ca.MX(ca.DM.zeros(N, 3))
+            g_rows, beams, ypr_beams = ca.repmat(g_depth, 1, N), ca.DM(self.beam_dirs_t), self.ypr_beams
+            radial_scale = range_scale = 1.0
+            for e, th in terms:
+                v_ping, g_rows = e.vessel_velocity(v_ping, ctx, th), e.g_depth(g_rows, ctx, th)
+                beams = e.beam_directions(beams, case.instrument.beam_angle_rad, th)
+                ypr_beams = e.installation(ypr_beams, th)
+                radial_scale, range_scale = radial_scale * e.radial_scale(th), range_scale * e.range_scale(th)
             bed = self.bed_at(k, N)
+            beds = [b for b in (e.bottom_velocity_model(th) for e, th in terms) if b is not None]
+            if beds:
+                extra_bed = ca.repmat(sum(beds[1:], beds[0]).T, N, 1)
+                bed = extra_bed if bed is None else bed + extra_bed
             v_bt = v_ping - bed if bed is not None else v_ping
-            radial, rng = bt_fun.map(N)(ca.DM(pings.time_s).T, ca.DM(depth).T, g_depth, case.instrument.sound_speed_m_s,
-                                        v_bt.T, self._p_rows(k, pings.time_s), self.r, self.ypr_beams,
-                                        ca.DM(self.beam_dirs_t))
+            radial, rng = bt_fun.map(N)(ca.DM(pings.time_s).T, ca.DM(depth).T, g_rows, case.instrument.sound_speed_m_s,
+                                        v_bt.T, self._p_rows(k, pings.time_s), self.r, ypr_beams, beams)
+            radial, rng = radial * radial_scale, rng * range_scale
             n_nodes += bt_fun.n_instructions() * N
             bt = pings.bt_radial_m_s
             for i in range(4):
@@ -466,7 +599,10 @@ class SurveyModel:
                 L = t_ref.size
                 dLam = att_c.map(L)(ca.DM(t_ref).T, self._p_rows(k, t_ref))[2]
                 v_model = ca.mtimes(ca.DM(hat_basis(t_ref, run.knots)), V)
-                v_ref = self.reference_function(case).map(L)(v_model.T, dLam)
+                p_ref = ca.DM(self.reference_point_sensor(case))
+                for e, th in terms:
+                    v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
+                v_ref = REFERENCE_VELOCITY.map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
                 for j in range(3):
                     models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
                     channels.append(Channel(k, f"reference_{NED[j]}", t_ref, np.isfinite(v_meas[:, j]).astype(float)))
@@ -490,11 +626,6 @@ class SurveyModel:
             p = np.asarray(euler_matrix(*self.spec.nominal_installation_ypr_rad)).T @ p
         return p
 
-    def reference_function(self, case: Case) -> ca.Function:
-        """``(v_a (3), dLambda/dt (3x3)) -> velocity`` of the reference's body point (true Earth)."""
-        v, dLam = ca.SX.sym("v_a", 3), ca.SX.sym("dLambda", 3, 3)
-        return ca.Function("reference_velocity", [v, dLam],
-                           [reference_point_velocity(v, dLam, ca.DM(self.reference_point_sensor(case)))])
 
     @property
     def has_prior(self) -> bool:
@@ -571,6 +702,8 @@ class SurveyModel:
     def row_jacobian(self, z: ca.MX, subs, threads: int) -> RowJacobian:
         """The residual Jacobian assembled from per-row Jacobians (:mod:`.row_jacobian`): each run's
         attitude, bottom-track and reference rows as blocks over their share of s and their knots."""
+        if self.effect_terms:
+            raise ValueError("jacobian: 'assembled' is for calibrations; a model with effects uses the symbolic one")
         shared, index = self.shared_vector()
         shared_z = ca.substitute([shared], *subs)[0]
         u = self.unknowns
@@ -627,7 +760,7 @@ class SurveyModel:
                 if has_h:
                     p_row = ca.vertcat(p_row, s[n_att:])
                 dLam = self.attitude_true[k](d1[0], p_row)[2]
-                vs = self.reference_function(case)(v, dLam)
+                vs = REFERENCE_VELOCITY(v, dLam, ca.DM(self.reference_point_sensor(case)))
                 blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), np.vstack([t_ref[None, :], local(t_ref)]),
                                        offset, velocity_basis=basis(t_ref), shared_index=idx, knot_columns=knots_cols))
                 offset += 3 * t_ref.size
@@ -641,6 +774,28 @@ class SurveyModel:
         return RowJacobian(z, shared_z, blocks, self.raw.shape[0], None, u.scale, threads=threads)
 
     # ------------------------------------------------------------------ starting values
+    def initial_x(self, params: list, angles, centre, heading_guess: float = 0.0) -> np.ndarray:
+        """A start: each run's attitude model (``params``, per run), the installation ``angles``
+        (when estimated) or the heading misalignment ``heading_guess``, the lever arms of a head
+        centred at ``centre``, a still bed, each run's knot velocities from its reference."""
+        u = self.unknowns
+        x = np.zeros(len(u.names))
+        for k, (run, p) in enumerate(zip(self.runs, params)):
+            if run.attitude_source == "model":
+                x[u.index(f"attitude{k}")] = p.pack()
+            if run.knots is not None:
+                x[u.index(f"velocity{k}")] = self.velocity_guess(k).reshape(-1)
+        angles = np.asarray(angles, dtype=float)
+        if self.heading is not None:
+            x[u.index("heading")[0]] = heading_guess
+        if self.spec.installation == "estimate":
+            x[u.index("installation")] = angles
+        elif self.spec.installation == "fixed":
+            angles = np.asarray(self.spec.nominal_installation_ypr_rad, dtype=float)
+        Lst = np.asarray(euler_matrix(*angles)) if not self.head_sensor else np.eye(3)
+        x[u.index("lever")] = self.lever.initial(centre, Lst, self.pos_t)
+        return x
+
     def velocity_guess(self, k: int) -> np.ndarray:
         """Knot velocities (K, 3) from the reference (NaN-aware per axis), else from the static
         bottom-track velocity; an axis with no data starts at zero."""

@@ -349,6 +349,16 @@ def _attitude_from_ypr(t, p, ypr) -> ca.Function:
     )
 
 
+def with_extra_mode(p, layout: AttitudeLayout, omega, decay, roll_cs, pitch_cs):
+    """Flat parameters of ``layout`` plus one mode (roll and pitch (C, S); yaw not coupled)
+    -> (p', layout'): an oscillation the model adds, e.g. steady wave-forced roll."""
+    s = layout.slices()
+    seg = lambda name: p[s[name]]
+    p_new = ca.vertcat(seg("modes"), omega, decay, seg("roll_bias"), seg("roll_cs"), roll_cs[0], roll_cs[1],
+                       seg("pitch_bias"), seg("pitch_cs"), pitch_cs[0], pitch_cs[1], seg("yaw_trend"), seg("yaw_cs"), 0, 0)
+    return p_new, AttitudeLayout(layout.n_modes + 1, layout.yaw_trend_order, layout.t_ref_s)
+
+
 def stack_matrices(block: np.ndarray, n: int) -> np.ndarray:
     """(3, 3n) horizontally mapped CasADi output -> (n, 3, 3)."""
     return np.asarray(block).reshape(3, n, 3).transpose(1, 0, 2)

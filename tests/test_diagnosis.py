@@ -50,7 +50,8 @@ def test_each_effect_is_injected_and_recorded(name):
 
 
 def test_leave_fold_out_step_is_exact_for_a_linear_model():
-    """One Gauss-Newton step from the full fit = refitting without the fold (linear LS)."""
+    """One Gauss-Newton step from the full fit = refitting without the fold (linear LS); each
+    prediction divided by sqrt(1 + h), h = a (A_t^T A_t)^-1 a^T its leverage (closed form)."""
     rng = np.random.default_rng(0)
     n, p = 300, 4
     t = np.linspace(0, 100, n)
@@ -65,7 +66,24 @@ def test_leave_fold_out_step_is_exact_for_a_linear_model():
     for k in range(4):
         tr = fold != k
         xk = np.linalg.lstsq(A[tr], y[tr], rcond=None)[0]
-        np.testing.assert_allclose(pred[~tr], (A @ xk - y)[~tr], atol=1e-5)
+        h = np.einsum("ij,jk,ik->i", A[~tr], np.linalg.inv(A[tr].T @ A[tr]), A[~tr])
+        np.testing.assert_allclose(pred[~tr], (A @ xk - y)[~tr] / np.sqrt(1 + h), atol=1e-5)
+
+
+def test_held_out_chi_square_of_a_correct_model_is_one_whatever_its_unknowns():
+    """A correct linear model with many local unknowns (a piecewise-linear curve, as the
+    navigation knots): the held-out residuals over their predictive sd have unit mean square,
+    where over the noise sd alone they would exceed it by the fit's own uncertainty."""
+    rng = np.random.default_rng(1)
+    n = 2000
+    t = np.sort(rng.uniform(0, 200, n))
+    knots = np.linspace(0, 200, 41)
+    A = np.column_stack([np.interp(t, knots, np.eye(knots.size)[k]) for k in range(knots.size)])
+    y = A @ rng.normal(size=knots.size) + rng.normal(size=n)
+    x = np.linalg.lstsq(A, y, rcond=None)[0]
+    model = SimpleNamespace(times=t, mask=np.ones(n), weights=lambda sigma: np.ones(n))
+    pred = _cv_residuals(model, SimpleNamespace(jacobian=A, raw=A @ x - y, sigma={}), folds=5, block_s=2.0)
+    assert np.mean(pred**2) == pytest.approx(1.0, abs=0.06)
 
 
 def test_channel_report_white_noise_and_a_sinusoid():
@@ -153,13 +171,25 @@ def test_case_without_attitude_is_refused_in_one_line():
 
 def test_diagnosis_on_the_sensor_samples_finds_a_beam_side_effect():
     """With the beams' attitude from the samples (what real runs with turns get), a sound-speed
-    error is still named; effects on the motion model are skipped with the reason."""
+    error is still named; the sensor's effects are tried on the samples (none skipped), an effect
+    that exists only on a motion model (an extra mode) is skipped with the reason."""
     case = simulate(with_effect(short_scenario(40.0), "sound_speed_error", {"relative_error": 0.03}), seed=2)
-    r = diagnose(case, DiagnosisConfig(effects=FEW, attitude="samples"))
+    r = diagnose(case, DiagnosisConfig(effects=FEW + ("forced_roll",), attitude="samples"))
     assert r.base["attitude_source"] == "samples" and r.base["success"]
     assert r.verdict == "sound_speed_error"
-    assert set(r.base["skipped_effects"]) == {"attitude_latency", "compass_deviation"}
+    assert set(r.base["skipped_effects"]) == {"forced_roll"} and "samples" in r.base["skipped_effects"]["forced_roll"]
     assert not any(w["channel"] in ("heading", "pitch", "roll") for w in r.where)
     assert r.statement.startswith("beams' attitude from the sensor's samples")
     with pytest.raises(ValueError, match="attitude: expected one of"):
         DiagnosisConfig(attitude="imu")
+
+
+def test_attitude_latency_is_found_on_the_sensor_samples():
+    """Real runs put the samples in the beams: a sensor stamping its samples 0.3 s late is undone
+    on them (the true attitude at t is the sample read at t + delay) and named, with its value."""
+    case = simulate(with_effect(short_scenario(60.0), "attitude_latency", {"delay_s": 0.3}), seed=4)
+    r = diagnose(case, DiagnosisConfig(effects=FEW, attitude="samples"))
+    assert r.verdict == "attitude_latency"
+    top = next(s for s in r.ranking if s["effect"] == "attitude_latency")
+    est, se = top["params"]["attitude_latency.delay_s"], top["params_se"]["attitude_latency.delay_s"]
+    assert abs(est - 0.3) < max(4 * se, 0.03)

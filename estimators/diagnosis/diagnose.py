@@ -1,16 +1,25 @@
-"""Sim-to-real gap diagnosis of one case: where the base model misses, which catalog
-effect explains it, and how far the held-out gap shrinks once that effect is added.
+"""Sim-to-real gap diagnosis of one run or of several runs of one boat: where the base model
+misses, which catalog effects explain it, and how far the held-out gap shrinks.
 
-1. Base fit (:class:`.model.GapModel` without effects), warm-started from the attitude
-   pre-fit (or a calibration).
-2. Noise levels per channel group: independent where the data allow (attitude from the
-   flexible pre-fit, bottom track from the four-beam error velocity), otherwise the
-   lowest residual level any fitted model reached.
-3. Each catalog effect refitted with the base fit as warm start; scored by the
-   likelihood ratio (profiled per-group noise), BIC and the chi-square p-value.
-4. The gap: excess chi-square per sample of residuals predicted on held-out time
-   blocks (one Gauss-Newton step from the full fit with the block left out), in units of
-   the noise levels: 0 when the model is as good as the noise.
+1. Base fit (:class:`.model.GapModel` without effects): the calibration's measurement model,
+   with a calibration's platform quantities pinned (lever arms, installation angles or heading
+   misalignment and deviation) and its noise levels as the start; without one, what the runs
+   determine (installation yaw or heading misalignment against a moving reference, lever arms).
+   Navigation follows the reference (knots), so speed changes are the base's.
+2. Noise levels per (run, channel group): independent where the data allow (attitude from the
+   flexible pre-fit, bottom track from the four-beam error velocity), otherwise the lowest
+   residual level any fitted model reached.
+3. Forward selection: every applicable catalog effect is refitted on top of the current model
+   (warm start); the best significant one (BIC better by ``bic_margin`` and at least
+   ``min_shrink`` of the held-out gap removed) joins the model, and the next round tries the rest.
+   Shared effects (compass, beam angles, sound speed, latency, lever arms, installation) act on
+   every run; per-run ones (moving bed, heave, forced roll) on each run separately.
+4. Confounding: an effect whose parameters share most of their variance with a base unknown (or
+   with an effect already chosen) cannot be told from it in these data: the report says which
+   and why instead of claiming it.
+5. The gap: excess chi-square per sample of residuals predicted on held-out time blocks (one
+   Gauss-Newton step from the full fit with the block left out), in units of the noise levels:
+   0 when the model is as good as the noise; with several runs also with whole runs held out.
 """
 
 from __future__ import annotations
@@ -23,25 +32,31 @@ from scipy import stats
 
 from ...cases.case import Case
 from ...models.effects import CATALOG, get_effect
-from ...models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
+from ...models.motion import AttitudeParams, evaluate_attitude
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration import ATTITUDES, choose_attitude
+from ..measurement_model import (EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre, initial_noise,
+                                 knot_times, reference_rows)
 from . import where as where_mod
-from .model import GROUPS, Fit, GapModel, base_attitude, group_of, initial_noise, residual_peaks
+from .model import DiagnosisBase, Fit, GapModel, Pins, base_attitude, group_of, residual_peaks
 
-INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt")
+INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference")  # estimated without the model (pre-fit, error velocity, first differences)
+PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
+PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
 
 
 @dataclass(frozen=True)
 class DiagnosisConfig:
     """Which effects to try and when a difference counts.
 
-    An effect is significant when its BIC improves on the base model's by more than
+    An effect is significant when its BIC improves on the current model's by more than
     ``bic_margin`` AND it removes at least ``min_shrink`` of the held-out gap. A gap is
     significant when its z-score (excess chi-square over its null standard deviation)
     exceeds ``gap_z`` and it exceeds ``min_gap`` (a practical floor: noise levels are
-    estimated, so a few percent of excess is not evidence).
+    estimated, so a few percent of excess is not evidence). Up to ``max_effects`` effects
+    are chosen one after another; an effect sharing more than ``confounded_share`` of its
+    parameters' variance with a base unknown or a chosen effect is named, not chosen.
     """
 
     effects: tuple = tuple(CATALOG)
@@ -52,6 +67,8 @@ class DiagnosisConfig:
     gap_z: float = 6.0
     min_gap: float = 0.1
     max_modes: int = 3
+    max_effects: int = 3
+    confounded_share: float = 0.9
     attitude: str = "auto"  # beams' attitude: model | samples | auto (as the calibration chooses)
     solver: SolverOptions = SolverOptions(tol=1e-6, max_iter=200, hessian="gauss-newton", expand=False, mu_init=1e-5)
 
@@ -64,6 +81,8 @@ class DiagnosisConfig:
             raise ValueError(f"cv_folds: expected an integer >= 2, got {self.cv_folds}")
         if not self.cv_block_s > 0:
             raise ValueError(f"cv_block_s: expected a positive duration in s, got {self.cv_block_s}")
+        if self.max_effects < 1:
+            raise ValueError(f"max_effects: expected an integer >= 1, got {self.max_effects}")
 
 
 @dataclass
@@ -82,6 +101,9 @@ class EffectScore:
     status: str
     iterations: int
     significant: bool = False
+    confounded_with: list = field(default_factory=list)
+    confounded_share: float = 0.0
+    round: int = 1
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -89,7 +111,8 @@ class EffectScore:
 
 @dataclass
 class DiagnosisResult:
-    """What :func:`diagnose` found. ``verdict`` is an effect name or ``none``."""
+    """What :func:`diagnose` found. ``verdict`` is an effect name, several joined by ``+``
+    (forward selection), or ``none``."""
 
     case: str
     verdict: str
@@ -105,51 +128,79 @@ class DiagnosisResult:
     base: dict
     velocity_error_before_m_s: float | None
     velocity_error_after_m_s: float | None
+    selected: list = field(default_factory=list)
+    confounded: list = field(default_factory=list)
+    runs: list = field(default_factory=list)
+    run_holdout: dict = field(default_factory=dict)
     fits: dict = field(default_factory=dict, repr=False)  # name -> (GapModel, Fit), for figures
     cv_residuals: dict = field(default_factory=dict, repr=False)
+    noise_levels: dict = field(default_factory=dict, repr=False)  # noise keyed by (run, group), as the models use it
 
     def to_dict(self) -> dict:
-        d = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("fits", "cv_residuals")}
+        d = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("fits", "cv_residuals", "noise_levels")}
         d["ranking"] = [r if isinstance(r, dict) else r.to_dict() for r in self.ranking]
         return d
 
 
 # ---------------------------------------------------------------------------- numbers
+def _key_name(model: GapModel, key) -> str:
+    return key[1] if model.n_runs == 1 else f"{model.base.runs[key[0]].case.name}/{key[1]}"
+
+
 def _group_sigma(model: GapModel, raw: np.ndarray) -> dict:
     out = {}
-    for g in model.groups_present:
-        m = (model.group_index == GROUPS.index(g)) & (model.mask > 0)
-        out[g] = float(np.sqrt(np.mean(raw[m] ** 2))) if m.any() else np.nan
+    for i, key in enumerate(model.sigma_keys):
+        m = (model.row_sigma == i) & (model.mask > 0)
+        out[key] = float(np.sqrt(np.mean(raw[m] ** 2))) if m.any() else np.nan
     return out
 
 
-def _cv_residuals(model: GapModel, fit: Fit, folds: int, block_s: float) -> np.ndarray:
+def _folds(model, folds: int, block_s: float) -> np.ndarray:
+    """Fold of every row: each run cut into contiguous blocks of about ``block_s``, dealt to the folds."""
+    row_run = getattr(model, "row_run", np.zeros(model.times.size, dtype=int))
+    fold_of = np.zeros(model.times.size, dtype=int)
+    offset = 0
+    for k in np.unique(row_run):
+        rows = row_run == k
+        t = model.times[rows]
+        n_blocks = max(folds, int(round((t.max() - t.min()) / block_s)))
+        edges = np.linspace(t.min(), t.max() + 1e-9, n_blocks + 1)
+        fold_of[rows] = (np.searchsorted(edges, t, side="right") - 1 + offset) % folds
+        offset += n_blocks
+    return fold_of
+
+
+def _cv_residuals(model, fit, folds: int, block_s: float, fold_of: np.ndarray | None = None) -> np.ndarray:
     """Raw residuals of each held-out fold predicted by the fit with that fold left out.
 
-    The run is cut into contiguous time blocks of about ``block_s`` dealt to the folds in
-    turn (so a fold is spread over the run and slowly varying unknowns stay
-    determined). The leave-fold-out estimate is one Gauss-Newton step from the full fit,
-    damped by a millionth of the full-data information so a direction only the fold
-    determines stays put. Unknowns pinned or held at a bound are not re-estimated (the
-    step would otherwise follow the bound's pull and fit the held-out data).
+    The leave-fold-out estimate is one Gauss-Newton step from the full fit, damped by a
+    millionth of the full-data information so a direction only the fold determines stays
+    put. Unknowns pinned or held at a bound are not re-estimated (the step would otherwise
+    follow the bound's pull and fit the held-out data). ``fold_of`` (rows): default time
+    blocks (:func:`_folds`); whole runs for a run hold-out.
+
+    Each prediction is divided by sqrt(1 + h), h = J_row (J_t^T J_t)^-1 J_row^T its leverage
+    (the training fit's uncertainty in units of the noise): a correct model then predicts with
+    unit chi-square whatever its number of unknowns (navigation knots, angles), so the gap
+    measures misfit, not the model's flexibility.
     """
     J = fit.jacobian
     if getattr(fit, "free", None) is not None:  # a pinned unknown or one at its bound stays put
         J = J[:, fit.free]
     w = model.weights(fit.sigma)
     e = w * fit.raw
-    t = model.times
-    n_blocks = max(folds, int(round((t.max() - t.min()) / block_s)))
-    edges = np.linspace(t.min(), t.max() + 1e-9, n_blocks + 1)
-    fold_of = (np.searchsorted(edges, t, side="right") - 1) % folds
+    fold_of = _folds(model, folds, block_s) if fold_of is None else fold_of
     damping = 1e-6 * np.maximum(np.sum(J**2, axis=0), 1e-12)
     pred = np.zeros_like(e)
-    for k in range(folds):
+    for k in np.unique(fold_of):
         out = fold_of == k
         tr = ~out & (model.mask > 0)
         Jt = J[tr]
-        step = -np.linalg.solve(Jt.T @ Jt + np.diag(damping), Jt.T @ e[tr])
-        pred[out] = e[out] + J[out] @ step
+        A_inv = np.linalg.inv(Jt.T @ Jt + np.diag(damping))
+        step = -A_inv @ (Jt.T @ e[tr])
+        Jo = J[out]
+        leverage = np.einsum("ij,jk,ik->i", Jo, A_inv, Jo)
+        pred[out] = (e[out] + Jo @ step) / np.sqrt(1.0 + np.maximum(leverage, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
 
@@ -157,207 +208,447 @@ def _cv_residuals(model: GapModel, fit: Fit, folds: int, block_s: float) -> np.n
 def _gap(model: GapModel, raw: np.ndarray, sigma: dict) -> tuple[float, float]:
     """Excess chi-square per sample and its z-score against the noise levels."""
     m = model.mask > 0
-    s = np.array([sigma[GROUPS[g]] for g in model.group_index])
+    s = np.array([sigma[k] for k in model.sigma_keys])[model.row_sigma]
     chi2 = float(np.mean((raw[m] / s[m]) ** 2))
     n = int(m.sum())
     return chi2 - 1.0, (chi2 - 1.0) * np.sqrt(n / 2.0)
 
 
-def _covariance_se(fit: Fit, model: GapModel) -> np.ndarray:
-    """Standard errors of the unknowns from the weighted Jacobian, scaled by the fit."""
+def _covariance(fit: Fit, model: GapModel) -> np.ndarray:
+    """Covariance of the scaled free unknowns (others zero), scaled by the fit's chi-square."""
     J = fit.jacobian
+    free = fit.free if fit.free is not None else np.ones(J.shape[1], dtype=bool)
     m = int((model.mask > 0).sum())
-    dof = max(m - J.shape[1], 1)
+    dof = max(m - int(free.sum()), 1)
     s2 = 2.0 * fit.objective / dof
-    cov = np.linalg.pinv(J.T @ J, rcond=1e-12) * s2
-    return np.sqrt(np.maximum(np.diag(cov), 0.0)) * fit.scale
+    cov = np.zeros((J.shape[1], J.shape[1]))
+    Jf = J[:, free]
+    cov[np.ix_(free, free)] = np.linalg.pinv(Jf.T @ Jf, rcond=1e-12) * s2
+    return cov
 
 
-def _velocity_error(case: Case, model: GapModel, fit: Fit) -> float | None:
-    """RMS horizontal error of the per-ping velocity over ground corrected with the fitted model."""
-    if case.truth is None or case.truth.vessel_velocity_m_s is None:
+def _velocity_error(model: GapModel, fit: Fit) -> float | None:
+    """RMS horizontal error of the per-ping velocity over ground corrected with the fitted model
+    (all runs with a truth)."""
+    errs = []
+    for k, run in enumerate(model.base.runs):
+        truth = run.case.truth
+        if truth is None or truth.vessel_velocity_m_s is None:
+            continue
+        v = model.corrected_velocity(fit, k)
+        err = v[:, :2] - truth.vessel_velocity_m_s[:, :2]
+        errs.append(err[np.all(np.isfinite(err), axis=1)])
+    if not errs or not np.concatenate(errs).size:
         return None
-    v = model.corrected_velocity(fit)
-    err = v[:, :2] - case.truth.vessel_velocity_m_s[:, :2]
-    ok = np.all(np.isfinite(err), axis=1)
-    return float(np.sqrt(np.mean(np.sum(err[ok] ** 2, axis=1)))) if ok.any() else None
+    err = np.concatenate(errs)
+    return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
 
 
-def _starting_nav(case: Case, att: AttitudeParams | SampledAttitude) -> np.ndarray:
-    ref = case.reference
-    if ref is None or ref.time_s is None or ref.velocity_m_s is None:
-        return np.zeros(4)
-    psi = att.heading_at(ref.time_s) if isinstance(att, SampledAttitude) else evaluate_attitude(att, ref.time_s)["ypr"][:, 0]
-    v = np.nan_to_num(ref.velocity_m_s)
-    fwd = v[:, 0] * np.cos(psi) + v[:, 1] * np.sin(psi)
-    side = -v[:, 0] * np.sin(psi) + v[:, 1] * np.cos(psi)
-    return np.array([np.median(fwd), np.median(side), 0.0, 0.0])
+# ---------------------------------------------------------------------------- the base
+def _calibrated_run(calibration: dict | None, case: Case) -> dict | None:
+    return next((r for r in (calibration or {}).get("runs") or [] if r.get("case") == case.name), None)
 
 
-def applicable(case: Case, name: str, sampled: bool = False) -> tuple[bool, str]:
+def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = None) -> DiagnosisBase:
+    """The base of a diagnosis: the runs' attitude and navigation, the calibration's platform
+    quantities pinned (or estimated from the runs), the starting noise levels."""
+    runs, notes = [], []
+    timing = "deep" if calibration and str(calibration.get("timing", "")).split(",")[0] in ("deep", "exact") else "shallow"
+    for case in cases:
+        af = fit_attitude(case, max_modes=config.max_modes)
+        own = _calibrated_run(calibration, case)
+        if own and own.get("attitude_model"):  # this very run was calibrated: its motion model starts the fit
+            af = dataclasses.replace(af, params=AttitudeParams.from_dict(own["attitude_model"]))
+        af = base_attitude(af)
+        source, reason = choose_attitude(case, af, config.attitude)
+        knots = knot_times(case, None)
+        runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None,
+                             reference_rows(case, knots), reason))
+    head = runs[0].case.attitude.frame == "transducer"
+    moving = any(r.moving_reference for r in runs)
+    v = cases[0].vessel
+    pins, sigma0 = {}, {}
+    installation, nominal, heading, centre = ("head" if head else "estimate" if moving else "fixed"), (0.0, 0.0, 0.0), \
+        ("misalignment" if head and moving else "off"), (0.0, 0.0)
+    if calibration is not None:
+        angles = calibration.get("installation_ypr_rad")
+        if not head:
+            installation = "fixed"
+            if angles is not None and all(a is not None for a in angles):
+                nominal = tuple(float(a) for a in angles)
+                notes.append("installation angles pinned at the calibration's")
+            else:
+                nominal = tuple((calibration.get("config") or {}).get("nominal_installation_ypr_rad") or (0.0, 0.0, 0.0))
+                notes.append("installation angles not determined by the calibration: its nominal ones are used")
+        deviation = calibration.get("compass_deviation_rad")
+        d = calibration.get("heading_misalignment_rad")
+        if head and moving and d is not None:
+            if deviation and deviation.get("sin") is not None:
+                heading = "deviation"
+                centre = heading_centre(runs)  # re-centre the calibration's correction on these runs' headings
+                d = d + deviation["sin"] * (centre[0] - deviation.get("mean_sin", 0.0)) + \
+                    deviation["cos"] * (centre[1] - deviation.get("mean_cos", 0.0))
+                pins.update({"compass_deviation_sin": float(deviation["sin"]), "compass_deviation_cos": float(deviation["cos"])})
+            pins["heading_misalignment"] = float(d)
+            notes.append("heading misalignment (and deviation) pinned at the calibration's")
+        key = "radius_vectors_head_m" if head else "radius_vectors_m"
+        r = np.array([[np.nan if c is None else c for c in row] for row in (calibration.get(key) or [])], dtype=float)
+        if r.shape == (4, 3) and np.all(np.isfinite(r)):
+            for a, value in zip("xyz", r.mean(axis=0)):
+                pins[f"P_{a}"] = float(value)
+            notes.append("lever arms pinned at the calibration's (head centre)")
+        for group, value in (calibration.get("noise_sigma") or {}).items():
+            if isinstance(value, (int, float)) and value > 0:
+                for k in range(len(runs)):
+                    sigma0[(k, group)] = float(value)
+    spec = ModelSpec(formulation="minimal", lever_box_m=0.5 * v.length_m if v.length_m else 10.0,
+                     installation=installation, nominal_installation_ypr_rad=nominal,
+                     yaw_centre_rad=course_offset_rad(runs) if installation == "estimate" or heading != "off" else 0.0,
+                     heading=heading, moving_bed="off", min_decay_1_s=0.01)
+    for k, run in enumerate(runs):
+        for group, value in initial_noise(run.case, run.fit, run.attitude_source == "model").items():
+            if group in INDEPENDENT_NOISE or (k, group) not in sigma0:
+                sigma0[(k, group)] = value
+    return DiagnosisBase(runs, spec, Pins(pins, "calibration" if calibration is not None else ""), sigma0, notes)
+
+
+def fit_base(cases, config: DiagnosisConfig, calibration: dict | None = None):
+    """(base, its model, its fit, noise levels): two passes, the noise of the groups without an
+    independent estimate re-estimated from the first."""
+    cases = [cases] if isinstance(cases, Case) else list(cases)
+    base = base_from(cases, config, calibration)
+    model = GapModel(base, solver=config.solver)
+    centre = np.array([base.pins.values.get(f"P_{a}", 0.0) for a in "xyz"])
+    angles = np.array([model.model.spec.yaw_centre_rad, 0.0, 0.0])
+    x0 = model.model.initial_x([r.fit.params for r in base.runs], angles, centre, heading_guess=angles[0])
+    x0 = model.start({**dict(zip(model.names, x0)), **base.pins.values})
+    # installation angles held at their start (the course offset) first, then freed from that optimum: a
+    # misfit the base cannot represent (an effect) must not drive them to their box in the first solve
+    held = {n: float(x0[i]) for i, n in enumerate(model.names) if n.startswith("installation_")}
+    if held:
+        x0 = model.solve(x0, base.sigma0, fixed=held).x
+    fit = model.solve(x0, base.sigma0)
+    sigma = dict(base.sigma0)
+    rms = _group_sigma(model, fit.raw)
+    for key in model.sigma_keys:
+        if key[1] not in INDEPENDENT_NOISE:
+            sigma[key] = max(rms[key], 1e-6)
+    fit = model.solve(fit.x, sigma)
+    return base, model, fit, sigma
+
+
+# ---------------------------------------------------------------------------- which effects
+def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
+    """Whether an effect can be tried on top of this base, and why not."""
     e = get_effect(name)
-    if sampled and e.acts_on_attitude_model:
-        return False, "acts on the motion model's attitude; the beams use the sensor's samples (no motion model follows them)"
-    ref = case.reference
-    moving = ref is not None and ref.time_s is not None and ref.velocity_m_s is not None
+    if base.sampled and e.needs_motion_model:
+        return False, "acts on the motion model only; the beams use the sensor's samples (which hold it already)"
+    moving = any(r.moving_reference for r in base.runs)
     if e.needs_reference and not moving:
         return False, "needs a moving reference velocity"
     if name == "moving_bed" and not moving:
         return False, "a moving bed is indistinguishable from vessel motion without a reference"
+    if name == "surge":
+        return False, "part of the base: its navigation (piecewise-linear velocity through the reference or bottom track) follows speed changes"
+    if name == "installation_misalignment" and base.spec.installation == "estimate":
+        return False, "part of the base: the installation angles are estimated against the moving reference"
+    if name == "deep_water_timing" and base.runs[0].timing != "shallow":
+        return False, "part of the base: the calibration's two-way timing"
     return True, ""
 
 
-# ---------------------------------------------------------------------------- main
-def fit_base(case: Case, config: DiagnosisConfig, calibration: dict | None = None):
-    af = fit_attitude(case, max_modes=config.max_modes)
-    att = base_attitude(af)
-    if calibration and calibration.get("attitude_model"):
-        att = base_attitude(dataclasses.replace(af, params=AttitudeParams.from_dict(calibration["attitude_model"])))
-    sigma0 = initial_noise(case, af)
-    source, reason = choose_attitude(case, af, config.attitude)
-    model = GapModel(case, att, solver=config.solver, sampled=source == "samples")
-    model.attitude_reason = reason
-    centre = np.zeros(3)
-    if calibration and calibration.get("radius_vectors_m") is not None:
-        r = np.array(calibration["radius_vectors_m"], dtype=float)  # null (undetermined) -> nan
-        if np.all(np.isfinite(r)):
-            centre = np.mean(r, axis=0) - np.mean(case.instrument.transducer_positions(), axis=0)
-    x0 = model.start(model.x_base(att, centre, _starting_nav(case, model.samples if model.sampled else att)))
-    fit = model.solve(x0, sigma0)
-    # second pass with the groups' noise levels re-estimated where no independent one exists
-    sigma = dict(sigma0)
-    rms = _group_sigma(model, fit.raw)
-    for g in model.groups_present:
-        if g not in INDEPENDENT_NOISE:
-            sigma[g] = max(rms[g], 1e-6)
-    fit = model.solve(fit.x, sigma)
-    return af, att, model, fit, sigma
+def _terms(base: DiagnosisBase, name: str) -> list:
+    """The model terms of one effect: shared by all runs, or one per run for per-run effects."""
+    e = get_effect(name)
+    if name in PER_RUN_EFFECTS and len(base.runs) > 1:
+        return [EffectTerm(e, k) for k in range(len(base.runs))]
+    return [EffectTerm(e)]
 
 
-def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibration: dict | None = None,
-             progress=None) -> DiagnosisResult:
-    """Diagnose the gap between the base model and one case, blind to its truth."""
-    ypr = case.attitude.ypr()
-    if ypr.shape[0] < 3 or np.all(np.ptp(ypr, axis=0) == 0):
-        raise ValueError(f"{case.name}: /attitude: heading, pitch and roll never change (no attitude recorded?); "
-                         "the gap diagnosis needs a measured attitude")
-    af, att, base_model, base, sigma_fit = fit_base(case, config, calibration)
-    peaks = residual_peaks(case, base.raw, base_model)
-    fits = {"base": (base_model, base)}
-    skipped = {}
-    for name in config.effects:
-        ok, why = applicable(case, name, base_model.sampled)
-        if not ok:
-            skipped[name] = why
+def _pinned_effect_parameters(model: GapModel, base: DiagnosisBase) -> dict:
+    """Effect unknowns the base already carries: the compass's constant against a free misalignment."""
+    out = {}
+    if base.spec.heading != "off" and "heading_misalignment" not in base.pins.values:
+        out.update({n: 0.0 for n in model.effect_names if n.endswith("compass_deviation.A_rad")})
+    return out
+
+
+def _confounding(model: GapModel, fit: Fit, effect_names: list, against: list, threshold: float) -> tuple[list, float]:
+    """Unknowns in ``against`` that share more than ``threshold`` of the effect parameters' variance."""
+    idx_e = [model.names.index(n) for n in effect_names]
+    idx_b = [model.names.index(n) for n in against if n in model.names]
+    free = fit.free if fit.free is not None else np.ones(len(model.names), dtype=bool)
+    idx_e = [i for i in idx_e if free[i]]
+    idx_b = [i for i in idx_b if free[i]]
+    if not idx_e or not idx_b:
+        return [], 0.0
+    C = _covariance(fit, model)
+    worst, names = 0.0, []
+    for i in idx_e:
+        if C[i, i] <= 0:
             continue
-        e = get_effect(name)
-        model = GapModel(case, att, [e], peaks, solver=config.solver, sampled=base_model.sampled)
-        starts = [model.start(base.x)] + [model.start(base.x, o) for o in e.extra_starts()]
+        c = C[i, idx_b]
+        share = float(c @ np.linalg.pinv(C[np.ix_(idx_b, idx_b)]) @ c / C[i, i])
+        if share > worst:
+            worst = share
+            F = np.abs(c) / np.sqrt(np.maximum(np.diag(C)[idx_b] * C[i, i], 1e-300))
+            names = [model.names[idx_b[j]] for j in np.argsort(F)[::-1] if F[j] > 0.3][:3]
+    return (names if worst > threshold else []), worst
+
+
+def _reason(effect: str, names: list, base: DiagnosisBase) -> str:
+    """Why two things are not told apart here, in the field's words."""
+    joined = ", ".join(names)
+    if effect == "moving_bed" and any(n.startswith(("heading_misalignment", "installation_yaw")) for n in names):
+        courses = []
+        for r in base.runs:
+            if r.moving_reference:
+                v = r.reference_velocity_m_s[:, :2]
+                ok = np.all(np.isfinite(v), axis=1)
+                courses.append(f"{np.rad2deg(np.angle(np.mean(np.exp(1j * np.arctan2(v[ok, 1], v[ok, 0]))))) % 360:.0f}")
+        return (f"moving bed vs {'heading misalignment' if base.spec.heading != 'off' else 'installation yaw'}: "
+                f"{'one course' if len(courses) == 1 else 'courses'} over ground {', '.join(courses)} deg, along which a bed "
+                "moving under the bottom track and a heading error look alike; calibrate transects in several directions "
+                "together (calibrate --joint) and diagnose with that calibration")
+    return f"{effect} vs {joined}: these data do not tell them apart"
+
+
+def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, noise, n_obs, config, round_) -> EffectScore:
+    k = len(model.effect_index) - len(ref_model.effect_index)
+    dll = fit.log_likelihood(model) - ref_fit.log_likelihood(ref_model)
+    dbic = -2.0 * dll + k * np.log(n_obs)
+    gap_after, _ = _gap(model, cv, noise)
+    shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
+    C = _covariance(fit, model)
+    se = np.sqrt(np.maximum(np.diag(C), 0)) * fit.scale
+    mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
+    return EffectScore(
+        effect=name, delta_ll=float(dll), delta_bic=float(dbic),
+        p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else (1.0 if dll <= 0 else 0.0),
+        n_params=k, params={n: float(fit.x[model.names.index(n)]) for n in mine},
+        params_se={n: float(se[model.names.index(n)]) for n in mine}, gap_after=float(gap_after),
+        shrink_fraction=float(shrink), velocity_error_m_s=_velocity_error(model, fit), success=fit.success,
+        status=fit.status, iterations=fit.iterations, round=round_)
+
+
+# ---------------------------------------------------------------------------- main
+def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: dict | None = None,
+             progress=None) -> DiagnosisResult:
+    """Diagnose the gap between the base model and one case (or several runs of one boat), blind
+    to its truth."""
+    cases = [cases] if isinstance(cases, Case) else list(cases)
+    for case in cases:
+        ypr = case.attitude.ypr()
+        if ypr.shape[0] < 3 or np.all(np.nan_to_num(np.ptp(ypr, axis=0)) == 0):
+            raise ValueError(f"{case.name}: /attitude: heading, pitch and roll never change (no attitude recorded?); "
+                             "the gap diagnosis needs a measured attitude")
+    base, base_model, base_fit, sigma_fit = fit_base(cases, config, calibration)
+    peaks = residual_peaks(base_model, base_fit)
+    fits = {"base": (base_model, base_fit)}
+    skipped, candidates = {}, []
+    for name in config.effects:
+        ok, why = applicable(base, name)
+        if ok:
+            candidates.append(name)
+        else:
+            skipped[name] = why
+    against = [n for n in base_model.names if n.startswith(PLATFORM)]
+
+    def refit(selected_terms, name, start_fit):
+        terms = selected_terms + _terms(base, name)
+        model = GapModel(base, terms, peaks, solver=config.solver)
+        values = dict(zip(start_fit.names, start_fit.x))
+        pinned = _pinned_effect_parameters(model, base)
+        extra = [o for t in _terms(base, name) for o in t.effect.extra_starts()]
+        starts = [model.start(values)] + [model.start(values, _renamed(model, o)) for o in extra]
         best = None
         for x0 in starts:
-            f = model.solve(x0, base.sigma)
+            f = model.solve(x0, start_fit.sigma, fixed=pinned)
             if best is None or f.objective < best.objective:
                 best = f
-        fits[name] = (model, best)
-        if progress:
-            progress(name)
+        if base.sampled and any(t.effect.name == "attitude_latency" for t in terms):
+            model, best = _latency_on_samples(base, terms, peaks, config, model, best, pinned)
+        return model, best
 
-    # noise levels: independent ones, lowered to the best level any model reached
+    # round 1: every candidate against the base (the ranking); later rounds: on top of the chosen ones
     noise = dict(sigma_fit)
-    for name, (model, f) in fits.items():
-        for g, v in _group_sigma(model, f.raw).items():
-            noise[g] = min(noise[g], v) if np.isfinite(v) else noise[g]
-    noise = {g: max(v, 1e-9) for g, v in noise.items()}
-
-    cv = {name: _cv_residuals(m, f, config.cv_folds, config.cv_block_s) for name, (m, f) in fits.items()}
-    gap_before, z_before = _gap(base_model, cv["base"], noise)
-    ll0 = base.log_likelihood(base_model)
     n_obs = int((base_model.mask > 0).sum())
-    v_before = _velocity_error(case, base_model, base)
-    ranking = []
-    for name, (model, f) in fits.items():
-        if name == "base":
-            continue
-        k = len(model.effect_index)
-        dll = f.log_likelihood(model) - ll0
-        dbic = -2.0 * dll + k * np.log(n_obs)
-        gap_after, _ = _gap(model, cv[name], noise)
-        shrink = (gap_before - gap_after) / gap_before if gap_before > 0 else 0.0
-        se = _covariance_se(f, model)
-        score = EffectScore(
-            effect=name, delta_ll=float(dll), delta_bic=float(dbic),
-            p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else (1.0 if dll <= 0 else 0.0),
-            n_params=k, params=f.effect_values(model),
-            params_se={n: float(se[i]) for n, i in zip(model.effect_names, model.effect_index)},
-            gap_after=float(gap_after), shrink_fraction=float(shrink),
-            velocity_error_m_s=_velocity_error(case, model, f),
-            success=f.success, status=f.status, iterations=f.iterations)
-        score.significant = bool(score.delta_bic < -config.bic_margin and shrink >= config.min_shrink
-                                 and gap_before > config.min_gap)
-        ranking.append(score)
-    ranking.sort(key=lambda s: (not s.significant, s.delta_bic))
-    best = ranking[0] if ranking and ranking[0].significant else None
+    selected_terms, selected, confounded, ranking = [], [], [], []
+    current_name, current = "base", (base_model, base_fit)
+    cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
+    for round_ in range(1, config.max_effects + 1):
+        tried = {}
+        for name in candidates:
+            if name in selected:
+                continue
+            model, f = refit(selected_terms, name, current[1])
+            label = name if round_ == 1 else "+".join(selected + [name])
+            tried[name] = (label, model, f)
+            fits[label] = (model, f)
+            if progress:
+                progress(label)
+        if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
+            for model, f in [v[1:] for v in tried.values()] + [(base_model, base_fit)]:
+                for key, value in _group_sigma(model, f.raw).items():
+                    noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
+            noise = {k: max(v, 1e-9) for k, v in noise.items()}
+            cv["base"] = _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)
+        ref_gap, _ = _gap(current[0], cv[current_name], noise)
+        scores = []
+        for name, (label, model, f) in tried.items():
+            cv[label] = _cv_residuals(model, f, config.cv_folds, config.cv_block_s)
+            s = _score(name, model, f, current[0], current[1], ref_gap, cv[label], noise, n_obs, config, round_)
+            mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
+            others = against + [n for n in model.effect_names if n not in mine]
+            s.confounded_with, s.confounded_share = _confounding(model, f, mine, others, config.confounded_share)
+            s.significant = bool(s.delta_bic < -config.bic_margin and s.shrink_fraction >= config.min_shrink
+                                 and ref_gap > config.min_gap)
+            scores.append(s)
+        scores.sort(key=lambda s: (not s.significant, s.delta_bic))
+        ranking += scores
+        # an effect the base's unknowns (or a chosen effect) largely stand in for: said in words, whether or not
+        # the rest of its signature still carries it
+        for sc in scores:
+            if sc.confounded_with and sc.delta_bic < -config.bic_margin and sc.effect not in [c["effect"] for c in confounded]:
+                confounded.append({"effect": sc.effect, "with": sc.confounded_with, "shared_variance": sc.confounded_share,
+                                   "chosen": sc.significant, "statement": _reason(sc.effect, sc.confounded_with, base)})
+        best = next((s for s in scores if s.significant), None)
+        if best is None:
+            break
+        selected.append(best.effect)
+        selected_terms += _terms(base, best.effect)
+        current_name = tried[best.effect][0]
+        current = fits[current_name]
 
-    where = _where(case, base_model, base, cv["base"], noise, att)
-    gap_sig_before = z_before > config.gap_z and gap_before > config.min_gap
-    if best is not None:
-        gap_after, z_after = _gap(fits[best.effect][0], cv[best.effect], noise)
+    gap_before, z_before = _gap(base_model, cv["base"], noise)
+    where = _where(base_model, base_fit, cv["base"], noise)
+    v_before = _velocity_error(base_model, base_fit)
+    if selected:
+        gap_after, z_after = _gap(current[0], cv[current_name], noise)
         remaining = z_after > config.gap_z and gap_after > config.min_gap
-        verdict = best.effect
-        statement = (f"{best.effect} explains the gap: held-out excess chi2 {gap_before:.3f} -> {gap_after:.3f} "
-                     f"(shrink {100 * best.shrink_fraction:.0f}%, delta BIC {best.delta_bic:.1f})")
+        verdict = "+".join(selected)
+        chosen = [next(s for s in ranking if s.effect == name and s.significant) for name in selected]
+        statement = (f"{' then '.join(selected)} explain{'s' if len(selected) == 1 else ''} the gap: held-out excess chi2 "
+                     f"{gap_before:.3f} -> {gap_after:.3f} ("
+                     + "; ".join(f"{s.effect}: shrink {100 * s.shrink_fraction:.0f}%, delta BIC {s.delta_bic:.1f}"
+                                 for s in chosen) + ")")
         if remaining:
-            statement += (f"; a significant gap remains after it (excess chi2 {gap_after:.3f}, z = {z_after:.1f}), "
-                          f"worst in {where[0]['channel']}: an effect outside the catalog, or more than one")
+            statement += (f"; a significant gap remains after {'it' if len(selected) == 1 else 'them'} (excess chi2 "
+                          f"{gap_after:.3f}, z = {z_after:.1f}), worst in {where[0]['channel']}: an effect outside the "
+                          "catalog, or more than the catalog's")
+        v_after = _velocity_error(*current)
     else:
-        gap_after, z_after, remaining, verdict = gap_before, z_before, gap_sig_before, "none"
-        if gap_sig_before:
+        gap_after, z_after, verdict = gap_before, z_before, "none"
+        remaining = z_before > config.gap_z and gap_before > config.min_gap
+        if remaining:
             statement = (f"no catalog effect is significant, but a significant gap remains (held-out excess chi2 "
                          f"{gap_before:.3f}, z = {z_before:.1f}), worst in {where[0]['channel']} "
                          f"({where[0]['detail']}): an effect outside the catalog")
         else:
             statement = f"no significant gap: the base model fits to the noise (held-out excess chi2 {gap_before:.3f})"
-    if base_model.sampled:
-        statement = ("beams' attitude from the sensor's samples (" + base_model.attitude_reason + "): the motion model "
-                     "itself is the first gap; on the rest of the model: " + statement)
-    base_info = {"success": base.success, "status": base.status, "iterations": base.iterations,
-                 "attitude_source": "samples" if base_model.sampled else "model",
-                 "attitude_source_reason": base_model.attitude_reason,
-                 "log_likelihood": float(ll0), "n_observations": n_obs, "skipped_effects": skipped,
-                 "unknowns": dict(zip(base.names[: base_model.n_base], map(float, base.x[: base_model.n_base])))}
+        v_after = v_before
+    for c in confounded:
+        if c["effect"] in selected:
+            statement += (f"; {c['effect']} shares {100 * c['shared_variance']:.0f}% of its variance with "
+                          f"{', '.join(c['with'])}: its value carries that ({c['statement']})")
+        else:
+            statement += f"; {c['effect']} improves the fit but cannot be separated here: {c['statement']}"
+    if base.sampled:
+        reasons = "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs if r.attitude_source == "samples"))
+        statement = ("beams' attitude from the sensor's samples (" + reasons + "): effects on the sensor are undone on "
+                     "the samples; " + statement)
+    if base.notes:
+        statement += " [base: " + "; ".join(base.notes) + "]"
+    run_holdout = {}
+    if len(cases) > 1 and selected:
+        runs_fold = base_model.row_run.copy()
+        for label, (m, f) in (("base", (base_model, base_fit)), (current_name, current)):
+            rv = _cv_residuals(m, f, config.cv_folds, config.cv_block_s, fold_of=runs_fold)
+            run_holdout[label] = _gap(m, rv, noise)[0]
+    base_info = {"success": base_fit.success, "status": base_fit.status, "iterations": base_fit.iterations,
+                 "attitude_source": ", ".join(dict.fromkeys("samples" if r.attitude_source == "samples" else "model"
+                                                            for r in base.runs)),
+                 "attitude_source_reason": "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs)),
+                 "calibration": base.pins.source or None, "pinned": base.pins.values, "notes": base.notes,
+                 "log_likelihood": float(base_fit.log_likelihood(base_model)), "n_observations": n_obs,
+                 "skipped_effects": skipped,
+                 "unknowns": {n: float(base_fit.x[i]) for i, n in enumerate(base_model.names)
+                              if not n.split("/")[-1].startswith(("V", "mode", "roll_", "pitch_", "yaw_"))}}
     return DiagnosisResult(
-        case=case.name, verdict=verdict, statement=statement, gap_before=float(gap_before), gap_after=float(gap_after),
-        gap_z_before=float(z_before), gap_z_after=float(z_after), remaining_gap_significant=bool(remaining),
-        where=where, ranking=[r.to_dict() for r in ranking], noise=noise, base=base_info,
-        velocity_error_before_m_s=v_before,
-        velocity_error_after_m_s=best.velocity_error_m_s if best is not None else v_before,
-        fits=fits, cv_residuals=cv)
+        case=", ".join(c.name for c in cases), verdict=verdict, statement=statement, gap_before=float(gap_before),
+        gap_after=float(gap_after), gap_z_before=float(z_before), gap_z_after=float(z_after),
+        remaining_gap_significant=bool(remaining), where=where, ranking=[r.to_dict() for r in ranking],
+        noise={_key_name(base_model, k): v for k, v in noise.items()}, base=base_info,
+        velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, confounded=confounded,
+        runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
 
 
-def _where(case: Case, model: GapModel, fit: Fit, cv_raw: np.ndarray, noise: dict, att: AttitudeParams) -> list:
+LATENCY_ITERATIONS = 3
+
+
+def _latency_on_samples(base, terms, peaks, config, model, fit, pinned):
+    """A latency on the sensor's samples: each row's sample segment is taken about t + the current
+    delay estimate and the fit repeated, so the delay is a shift within the samples, not an
+    extrapolation of one segment (a fixed point: exact linear interpolation at t + delay)."""
+    name = next(n for n in model.names if n.endswith("attitude_latency.delay_s"))
+    for _ in range(LATENCY_ITERATIONS):
+        delay = float(fit.x[model.names.index(name)])
+        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, sample_shift_s=delay) for r in base.runs])
+        model = GapModel(shifted, terms, peaks, solver=config.solver)
+        new = model.solve(model.start(dict(zip(fit.names, fit.x))), fit.sigma, fixed=pinned)
+        moved = abs(float(new.x[model.names.index(name)]) - delay)
+        fit = new
+        if moved < 1e-3:
+            break
+    return model, fit
+
+
+def _renamed(model: GapModel, overrides: dict) -> dict:
+    """An effect's extra start ({"effect.param": v}) on this model's names (per-run ones prefixed)."""
+    out = {}
+    for key, value in overrides.items():
+        for n in model.names:
+            if n == key or n.endswith("/" + key):
+                out[n] = value
+    return out
+
+
+def _where(model: GapModel, fit: Fit, cv_raw: np.ndarray, noise: dict) -> list:
     """Ranked channel reports of the base model's held-out residuals."""
-    p = att if model.sampled else AttitudeParams.unpack(fit.x[:att.layout.size], att.layout)
-    modes = [float(w) for w, _ in p.modes]
     reports = []
-    for ch, sl in model.channel_slices().items():
-        m = model.mask[sl] > 0
+    sl = model.channel_slices()
+    for (name, _), key_index in zip(model.channels, _channel_keys(model)):
+        s = sl[name]
+        m = model.mask[s] > 0
         if m.sum() < 3:
             continue
-        t = model.times[sl][m]
-        if model.sampled:  # the samples' interpolation and segment slopes (no accelerations)
-            local = model.samples.params_at(t)
+        k = model.sigma_keys[key_index][0]
+        run = model.base.runs[k]
+        t = model.times[s][m]
+        if run.attitude_source == "samples":  # the samples' interpolation and segment slopes (no accelerations)
+            local = run.samples.params_at(t)
             now, rate, accel = local[1:4].T, local[4:7].T, None
+            modes = [float(w) for w, _ in run.fit.params.modes]
         else:
+            idx = model.model.unknowns.index(f"attitude{k}")
+            p = AttitudeParams.unpack(fit.x[idx], run.fit.params.layout)
+            modes = [float(w) for w, _ in p.modes]
             dt = 0.05
-            ypr = [evaluate_attitude(p, t + k * dt)["ypr"] for k in (-1, 0, 1)]
+            ypr = [evaluate_attitude(p, t + j * dt)["ypr"] for j in (-1, 0, 1)]
             now, rate, accel = ypr[1], (ypr[2] - ypr[0]) / (2 * dt), (ypr[2] - 2 * ypr[1] + ypr[0]) / dt**2
         reg = {"roll rate": rate[:, 2], "pitch rate": rate[:, 1], "yaw rate": rate[:, 0],
                "sin heading": np.sin(now[:, 0]), "cos heading": np.cos(now[:, 0]),
                "roll": now[:, 2], "pitch": now[:, 1], "time": t}
         if accel is not None:
             reg.update({"roll acceleration": accel[:, 2], "pitch acceleration": accel[:, 1]})
-        v = model.nav_at(fit.x, t)
+        v = model.nav_at(fit.x, t, k)
         reg["speed"] = np.hypot(v[:, 0], v[:, 1])
-        reg["depth"] = np.interp(t, case.pings.time_s, case.environment.depth_at_pings(case.pings.n))
-        reports.append(where_mod.channel_report(ch, t, cv_raw[sl][m], noise[group_of(ch)], reg, modes))
+        reg["depth"] = np.interp(t, run.case.pings.time_s, run.case.environment.depth_at_pings(run.case.pings.n))
+        reports.append(where_mod.channel_report(name, t, cv_raw[s][m], noise[model.sigma_keys[key_index]], reg, modes))
     return where_mod.rank(reports)
+
+
+def _channel_keys(model: GapModel) -> list:
+    """Index of each channel's (run, group) noise key."""
+    sl = model.channel_slices()
+    return [int(model.row_sigma[sl[name].start]) for name, _ in model.channels]

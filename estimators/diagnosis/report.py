@@ -11,7 +11,7 @@ import numpy as np
 
 from ...cases.atomic import atomic_path
 from ..calibration import _jsonable
-from .model import group_of
+from .model import noise_key
 
 
 def write_json(result, path) -> None:
@@ -67,7 +67,7 @@ def figures(result, folder) -> list[Path]:
     channels = [w["channel"] for w in result.where]
     fig, axes = plt.subplots(len(channels), 2, figsize=(12, 1.6 * len(channels) + 1), squeeze=False)
     for row, ch in enumerate(channels):
-        sigma = result.noise[group_of(ch)]
+        sigma = result.noise[noise_key(ch)]
         for label, raw, model in shown:
             sl = model.channel_slices()[ch]
             m = model.mask[sl] > 0

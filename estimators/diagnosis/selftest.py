@@ -47,7 +47,7 @@ def oracle_shrink(result, label: str, params: dict, config: DiagnosisConfig) -> 
         return None
     pinned = model.solve(fit.x.copy(), fit.sigma, fixed=fixed)
     cv = _cv_residuals(model, pinned, config.cv_folds, config.cv_block_s)
-    gap, _ = _gap(model, cv, result.noise)
+    gap, _ = _gap(model, cv, result.noise_levels)
     return (result.gap_before - gap) / result.gap_before if result.gap_before > 0 else None
 
 

@@ -19,5 +19,8 @@ class AttitudeLatency(Effect):
     def attitude_time(self, t, th):
         return t - th[0]
 
+    def sampled_time(self, t, th):
+        return t + th[0]
+
     def extra_starts(self):
         return [{"attitude_latency.delay_s": 0.25}, {"attitude_latency.delay_s": -0.25}]

@@ -38,12 +38,24 @@ class Effect:
     needs_rotation: bool = False
 
     # ------------------------------------------------------------ parameters
+    def _overrides(self, *hooks) -> bool:
+        return any(getattr(type(self), h) is not getattr(Effect, h) for h in hooks)
+
     @property
     def acts_on_attitude_model(self) -> bool:
         """Whether the effect reshapes the fitted motion model (its time base, tilt, heading
-        reading or modes): meaningless when the beams use the sensor's samples."""
-        return any(getattr(type(self), h) is not getattr(Effect, h)
-                   for h in ("attitude_time", "tilt_attitude_params", "heading_reading", "extra_mode"))
+        reading or modes)."""
+        return self._overrides("attitude_time", "tilt_attitude_params", "heading_reading", "extra_mode")
+
+    @property
+    def acts_on_samples(self) -> bool:
+        """Whether the effect can be undone on the sensor's samples (when the beams use them)."""
+        return self._overrides("sampled_time", "sampled_tilt", "sampled_heading_correction")
+
+    @property
+    def needs_motion_model(self) -> bool:
+        """Whether the effect only exists on a motion model (an extra mode: samples hold it already)."""
+        return self.acts_on_attitude_model and not self.acts_on_samples
 
     @property
     def names(self) -> list[str]:
@@ -159,3 +171,18 @@ class Effect:
     def extra_mode(self, th):
         """(omega, decay, roll (C, S), pitch (C, S)) of an extra oscillation, or None."""
         return None
+
+    # ------------------------------------------------------------ on the sensor's samples (symbolic)
+    # When the beams' attitude is the sensor's samples (interpolated linearly: angle and slope of
+    # the segment about each row), an effect of the sensor is undone on them.
+    def sampled_time(self, t, th):
+        """The time whose reading holds the true attitude at t."""
+        return t
+
+    def sampled_tilt(self, tilt, tilt_rate, th):
+        """True pitch and roll (2,) from the read ones and their rates."""
+        return tilt
+
+    def sampled_heading_correction(self, psi, th):
+        """Added to the read heading psi to give the true heading."""
+        return 0

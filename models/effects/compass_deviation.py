@@ -34,3 +34,6 @@ class CompassDeviation(Effect):
 
     def heading_reading(self, psi, th):
         return psi + th[0] + th[1] * ca.sin(psi) + th[2] * ca.cos(psi)
+
+    def sampled_heading_correction(self, psi, th):
+        return -(th[0] + th[1] * ca.sin(psi) + th[2] * ca.cos(psi))  # first order in the deviation

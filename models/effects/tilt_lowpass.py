@@ -56,5 +56,8 @@ class TiltLowpass(Effect):
                 parts[base + 2 * k + 1] = (c * b + sn * a) / den
         return ca.vertcat(*parts)
 
+    def sampled_tilt(self, tilt, tilt_rate, th):
+        return tilt + th[0] * tilt_rate  # inverse of tau dy/dt + y = x
+
     def extra_starts(self):
         return [{"tilt_lowpass.tau_s": 0.3}]
