@@ -421,15 +421,22 @@ def cmd_diagnose(args) -> int:
     if not args.case or not args.out:
         raise ValueError("diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)")
     from .cases.atomic import refuse_overwrite_input
+    from .cases.collect import collect_case_paths, is_many
     from .estimators.diagnosis.diagnose import DiagnosisConfig, diagnose
     from .estimators.diagnosis.report import table, write_report
 
-    refuse_overwrite_input(args.out, args.case, args.calibration)
-    case = _read(args.case)
+    if is_many(args.case) and not args.joint:
+        raise ValueError("diagnose: several cases: add --joint to diagnose them together (one boat, shared and per-run effects)")
+    paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
+    refuse_overwrite_input(args.out, *paths, args.calibration)
     calibration = _load_calibration(args.calibration)
+    cases = [as_calibrated_run(_read(p), p, calibration) for p in paths]
+    if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
+        cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
                              attitude=args.attitude)
-    result = diagnose(case, config, calibration=calibration)
+    result = diagnose(cases if args.joint else cases[0], config, calibration=calibration,
+                      progress=lambda name: print(f"  fitted {name}", file=sys.stderr))
     paths = write_report(result, args.out)
     print(table(result))
     print("wrote " + ", ".join(str(p) for p in paths))
@@ -565,8 +572,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_compare_formulations)
 
     s = sub.add_parser("diagnose", help="where the sim-to-real gap lies, which unmodelled effect causes it, how far it shrinks")
-    s.add_argument("case", nargs="?", help="CASE.h5 (omit with --selftest)")
-    s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (start of the base fit)")
+    s.add_argument("case", nargs="*", help="CASE.h5 (omit with --selftest); with --joint several runs, folders or globs")
+    s.add_argument("--joint", action="store_true",
+                   help="several runs of one boat together: shared effects (compass, beams, sound speed, latency, lever "
+                        "arms) and per-run ones (moving bed, heave, forced roll); whole runs held out too")
+    s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (its platform quantities pinned in the base)")
     s.add_argument("--out", help="DIAG.json (DIAG.md and a figure are written beside it)")
     s.add_argument("--effects", nargs="+", help="catalog effects to try (default: all)")
     s.add_argument("--attitude", default="auto",

@@ -267,7 +267,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
     head = runs[0].case.attitude.frame == "transducer"
     moving = any(r.moving_reference for r in runs)
     v = cases[0].vessel
-    pins, sigma0 = {}, {}
+    pins, sigma0, moving_bed = {}, {}, "off"
     installation, nominal, heading, centre = ("head" if head else "estimate" if moving else "fixed"), (0.0, 0.0, 0.0), \
         ("misalignment" if head and moving else "off"), (0.0, 0.0)
     if calibration is not None:
@@ -297,6 +297,13 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
             for a, value in zip("xyz", r.mean(axis=0)):
                 pins[f"P_{a}"] = float(value)
             notes.append("lever arms pinned at the calibration's (head centre)")
+        bed = calibration.get("moving_bed_velocity_m_s")
+        calibrated_runs = {r.get("case") for r in calibration.get("runs") or []}
+        if bed is not None and None not in bed and all(c.name in calibrated_runs for c in cases) \
+                and (calibration.get("moving_bed") or {}).get("model", "constant") == "constant":
+            moving_bed = "constant"  # these very runs were calibrated: their bed is the base's
+            pins.update({"moving_bed_north": float(bed[0]), "moving_bed_east": float(bed[1])})
+            notes.append("moving bed pinned at the calibration's (these runs were calibrated)")
         for group, value in (calibration.get("noise_sigma") or {}).items():
             if isinstance(value, (int, float)) and value > 0:
                 for k in range(len(runs)):
@@ -304,7 +311,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
     spec = ModelSpec(formulation="minimal", lever_box_m=0.5 * v.length_m if v.length_m else 10.0,
                      installation=installation, nominal_installation_ypr_rad=nominal,
                      yaw_centre_rad=course_offset_rad(runs) if installation == "estimate" or heading != "off" else 0.0,
-                     heading=heading, moving_bed="off", min_decay_1_s=0.01)
+                     heading=heading, moving_bed=moving_bed, min_decay_1_s=0.01)
     for k, run in enumerate(runs):
         for group, value in initial_noise(run.case, run.fit, run.attitude_source == "model").items():
             if group in INDEPENDENT_NOISE or (k, group) not in sigma0:

@@ -85,7 +85,8 @@ def figures(result, folder) -> list[Path]:
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("angular frequency (rad/s)")
     fig.tight_layout()
-    out = folder / f"{result.case}_residuals.png"
+    stem = result.runs[0] + (f"_and_{len(result.runs) - 1}_more" if len(result.runs) > 1 else "") if result.runs else result.case
+    out = folder / f"{stem}_residuals.png"
     with atomic_path(out, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=90)
     plt.close(fig)
