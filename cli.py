@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -30,8 +33,10 @@ def cmd_scenarios(args) -> int:
 def cmd_simulate(args) -> int:
     from .cases.io import write_case
     from .cases.scenario import get_scenario
+    from .cases.atomic import check_output_file
     from .models.simulator import simulate
 
+    check_output_file(args.out)
     case = simulate(get_scenario(args.scenario), seed=args.seed)
     write_case(case, args.out)
     print(f"wrote {args.out}: {case.pings.n} pings, {case.attitude.time_s.size} attitude samples")
@@ -40,9 +45,11 @@ def cmd_simulate(args) -> int:
 
 def cmd_import(args) -> int:
     """A real instrument file (TRDI PD0, Nortek AD2CP) into a case file, with its audit trail."""
+    from .cases.atomic import check_output_file
     from .cases.importers import Window, import_file, write_imported
 
     path = Path(args.file)
+    check_output_file(args.out, path)
     case, attrs = import_file(path, Window(start_s=args.start, end_s=args.end, every=args.every))
     write_imported(case, attrs, args.out, source=path)
     prov = attrs["/provenance"]
@@ -83,11 +90,13 @@ def _load_calibration(path):
 
 
 def _batch_out(args) -> Path:
+    """--out of many cases: a folder (created when its parent exists), checked before any work."""
+    from .cases.atomic import check_output_folder
+
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out: {out} is a file; with many cases --out names a folder (one output per case)")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    return check_output_folder(out)
 
 
 def _run_batch(args, jobs, columns) -> int:
@@ -117,7 +126,7 @@ def _run_batch(args, jobs, columns) -> int:
 
 
 def cmd_correct(args) -> int:
-    from .cases.atomic import refuse_overwrite_input
+    from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
     from .cases.corrected import write_correction
 
@@ -134,7 +143,7 @@ def cmd_correct(args) -> int:
         return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
-    refuse_overwrite_input(args.out, args.case, args.calibration)
+    check_output_file(args.out, args.case, args.calibration)
     case = _read(args.case)
     result = _correct(case, args.method, _load_calibration(args.calibration), args.timing)
     write_correction(result, args.out, source_case=str(args.case))
@@ -150,8 +159,11 @@ def cmd_correct(args) -> int:
 def cmd_compare(args) -> int:
     """Every correction method on one case: the paper's metrics table and figures."""
     from .estimators.metrics import format_table, velocity_metrics
+    from .cases.atomic import check_output_folder
     from .plots import velocity_figure
 
+    if args.out:
+        check_output_folder(args.out)
     case = _read(args.case)
     calibration = _load_calibration(args.calibration)
     methods = [m for m in CORRECTION_METHODS if m != "oracle" or case.truth is not None]
@@ -181,7 +193,6 @@ def cmd_compare(args) -> int:
         from .cases.atomic import atomic_path
 
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
         with atomic_path(out / f"{case.name}_compare.json") as tmp, open(tmp, "w") as fh:
             json.dump({**table, "not_run": not_run}, fh, indent=2)
         velocity_figure(case.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, reference,
@@ -201,7 +212,7 @@ def _calibration_config(args, formulation=None):
 def cmd_calibrate(args) -> int:
     import warnings
 
-    from .cases.atomic import refuse_overwrite_input
+    from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
     from .estimators.calibration import CalibrationProblem
 
@@ -216,7 +227,7 @@ def cmd_calibrate(args) -> int:
                                        ("max viol", "max_constraint_violation", 10, "{:.1e}".format),
                                        ("at best", "fraction_at_best", 9, "{:.2f}".format)])
     args.case = args.case[0]
-    refuse_overwrite_input(args.out, args.case)
+    check_output_file(args.out, args.case)
     case = _read(args.case)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every warning is written into the result and printed below
@@ -248,8 +259,11 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_compare_formulations(args) -> int:
+    from .cases.atomic import check_output_file
     from .estimators.formulation_compare import compare_formulations, format_rows
 
+    if args.out:
+        check_output_file(args.out, args.case)
     case = _read(args.case)
     rows = compare_formulations(case, _calibration_config(args))
     print(format_rows(rows))
@@ -275,8 +289,10 @@ def cmd_demo(args) -> int:
     from .models.simulator import simulate
     from .plots import attitude_fit_figure, radius_vectors_figure, velocity_figure
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    from .cases.atomic import check_output_folder
+
+    out = check_output_folder(args.out)
+    out.mkdir(exist_ok=True)
     cases = {}
     for name in (args.calibration_scenario, *args.scenario):
         case = simulate(get_scenario(name), seed=args.seed)
@@ -339,11 +355,11 @@ def cmd_diagnose(args) -> int:
         return _diagnose_selftest(args)
     if not args.case or not args.out:
         raise ValueError("diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)")
-    from .cases.atomic import refuse_overwrite_input
+    from .cases.atomic import check_output_file
     from .estimators.diagnosis.diagnose import DiagnosisConfig, diagnose
     from .estimators.diagnosis.report import table, write_report
 
-    refuse_overwrite_input(args.out, args.case, args.calibration)
+    check_output_file(args.out, args.case, args.calibration)
     case = _read(args.case)
     calibration = _load_calibration(args.calibration)
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
@@ -358,11 +374,13 @@ def cmd_diagnose(args) -> int:
 def _diagnose_selftest(args) -> int:
     from tqdm import tqdm
 
-    from .cases.atomic import atomic_path
+    from .cases.atomic import atomic_path, check_output_file
     from .estimators.calibration import _jsonable
     from .estimators.diagnosis.diagnose import DiagnosisConfig
     from .estimators.diagnosis.selftest import draw_cases, format_summary, run_one, summarise
 
+    if args.out:
+        check_output_file(args.out)
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
     draws = draw_cases(args.selftest, args.seed, config.effects)
     rows = []
@@ -386,8 +404,10 @@ def _diagnose_selftest(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    from .cases.atomic import check_output_folder
     from .solvers.bench import run
 
+    check_output_folder(args.out)
     run(args.suite, args.quick, Path(args.out))
     return 0
 
@@ -492,14 +512,47 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+class Terminated(BaseException):
+    """SIGTERM as an exception, so that atomic writers remove their temporary files."""
+
+
+def _terminate(signum, frame):
+    raise Terminated(f"terminated by signal {signum}")
+
+
+@contextlib.contextmanager
+def _sigterm_as_exception():
+    """Turn SIGTERM into :class:`Terminated` while a command runs (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        with _sigterm_as_exception():
+            return args.func(args)
     except (ValueError, OSError) as exc:
         # CaseFormatError is a ValueError; every user-facing error is one line.
-        print(f"adcpdyn {args.command}: error: {exc}", file=sys.stderr)
+        print(f"adcpdyn {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+    except Terminated as exc:
+        print(f"adcpdyn {args.command}: {exc}; stopped (no partial file left)", file=sys.stderr)
+        return 128 + signal.SIGTERM
+    except KeyboardInterrupt:
+        print(f"adcpdyn {args.command}: interrupted; stopped (no partial file left)", file=sys.stderr)
+        return 128 + signal.SIGINT
 
 
 if __name__ == "__main__":
