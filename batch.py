@@ -64,10 +64,9 @@ def _correct(job: CorrectJob) -> dict:
     from .cases.io import read_case
     from .estimators.correct_case import correct_case
 
-    calibration = None
-    if job.calibration_path is not None:
-        with open(job.calibration_path) as fh:
-            calibration = json.load(fh)
+    from .estimators.calibration_file import read_calibration
+
+    calibration = None if job.calibration_path is None else read_calibration(job.calibration_path)
     result = correct_case(read_case(job.case_path), job.method, calibration, job.timing)
     write_correction(result, job.out_path, source_case=job.case_path)
     v = result.vessel_velocity_m_s

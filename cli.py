@@ -83,10 +83,10 @@ from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
 def _load_calibration(path):
-    if path is None:
-        return None
-    with open(path) as fh:
-        return json.load(fh)
+    """The validated CALIB.json of --calibration (None without one)."""
+    from .estimators.calibration_file import read_calibration
+
+    return None if path is None else read_calibration(path)
 
 
 def _batch_out(args) -> Path:
@@ -137,6 +137,7 @@ def cmd_correct(args) -> int:
         if args.method not in CORRECTION_METHODS:
             raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {args.method!r}")
         paths, out = collect_case_paths(args.case), _batch_out(args)
+        _load_calibration(args.calibration)  # a bad file is one error here, not one per case
         calib = str(Path(args.calibration).resolve()) if args.calibration else None
         jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing)
                 for p in paths]
@@ -325,7 +326,7 @@ def cmd_demo(args) -> int:
     radius_vectors_figure(calib.lever_arms_sensor_m, calib.lever_arms_sensor_se_m, truth, label, out / "radius_vectors.png")
 
     # 2. measurement runs: every correction method against truth (the paper's Tables 8 and 12)
-    calibration = json.loads((out / "calibration.json").read_text())
+    calibration = _load_calibration(out / "calibration.json")
     summary = {"calibration": err}
     for name in args.scenario:
         case = cases[name]

@@ -177,18 +177,11 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
 
 def lever_arms_from_calibration(calibration: dict, case: Case) -> tuple[np.ndarray, np.ndarray]:
     """(lever arms in the case's sensor frame, installation angles for beams) from CALIB.json contents."""
-    def arr(key):
-        value = calibration.get(key)
-        if value is None:
-            raise ValueError(f"calibration: {key}: missing; expected the output of `adcpdyn calibrate`")
-        a = np.array(value, dtype=float)
-        if np.any(~np.isfinite(a)):
-            raise ValueError(f"calibration: {key}: contains undetermined (null) values; this calibration cannot correct")
-        return a
+    from .calibration_file import installation_angles, lever_arms
 
     if case.attitude.frame == "transducer":
-        return arr("radius_vectors_head_m"), np.zeros(3)
-    return arr("radius_vectors_m"), arr("installation_ypr_rad")
+        return lever_arms(calibration, "transducer"), np.zeros(3)
+    return lever_arms(calibration, "vessel"), installation_angles(calibration)
 
 
 def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
@@ -198,10 +191,12 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
     magnetic declination) is an Earth-frame heading offset, Rz(d) Lambda = Lambda(psi + d): it is
     applied to the readings, like TRDI's heading bias (EB). Other cases are returned unchanged.
     """
-    delta = None if calibration is None else calibration.get("heading_misalignment_rad")
+    from .calibration_file import heading_misalignment
+
+    delta = heading_misalignment(calibration)
     if delta is None or case.attitude.frame != "transducer":
         return case
-    att = dataclasses.replace(case.attitude, heading_rad=case.attitude.heading_rad + float(delta))
+    att = dataclasses.replace(case.attitude, heading_rad=case.attitude.heading_rad + delta)
     return case.replace(attitude=att)
 
 
@@ -242,6 +237,9 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     else:
         if calibration is None:
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
+        from .calibration_file import as_calibration
+
+        calibration = as_calibration(calibration)
         case = with_heading_misalignment(case, calibration)
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
         if attitude is None and calibration.get("attitude_source") == "samples":  # as the calibration's beams

@@ -11,19 +11,16 @@ CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
 
 def installation_from(calibration: dict) -> np.ndarray:
     """Installation angles of a CALIB.json, or a one-line error naming the field."""
-    value = calibration.get("installation_ypr_rad")
-    if value is None or any(v is None for v in value):
-        raise ValueError("calibration: installation_ypr_rad: missing or not determined; expected 3 angles in radians")
-    return np.asarray(value, dtype=float)
+    from .calibration_file import installation_angles
+
+    return installation_angles(calibration)
 
 
 def assumed_installation(calibration: dict) -> np.ndarray:
     """The nominal installation angles of the calibration's configuration (the mounting as set up)."""
-    value = (calibration.get("config") or {}).get("nominal_installation_ypr_rad")
-    if value is None or len(value) != 3 or any(v is None for v in value):
-        raise ValueError("calibration: installation_ypr_rad is not determined and config.nominal_installation_ypr_rad "
-                         "is missing; expected 3 angles in radians")
-    return np.asarray(value, dtype=float)
+    from .calibration_file import nominal_installation
+
+    return nominal_installation(calibration)
 
 
 def correct_case(case: Case, method: str, calibration: dict | None, timing: str = "deep"):
@@ -33,8 +30,12 @@ def correct_case(case: Case, method: str, calibration: dict | None, timing: str 
     from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
+    from .calibration_file import as_calibration
+
     if method not in CORRECTION_METHODS:
         raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
+    if calibration is not None:
+        calibration = as_calibration(calibration)
     if method == "asc":
         ypr, note = None, None
         if calibration is not None and case.attitude.frame == "vessel":

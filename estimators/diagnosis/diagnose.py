@@ -237,6 +237,10 @@ def fit_base(case: Case, config: DiagnosisConfig, calibration: dict | None = Non
 def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibration: dict | None = None,
              progress=None) -> DiagnosisResult:
     """Diagnose the gap between the base model and one case, blind to its truth."""
+    if calibration is not None:
+        from ..calibration_file import as_calibration
+
+        calibration = as_calibration(calibration)
     ypr = case.attitude.ypr()
     if ypr.shape[0] < 3 or np.all(np.ptp(ypr, axis=0) == 0):
         raise ValueError(f"{case.name}: /attitude: heading, pitch and roll never change (no attitude recorded?); "
