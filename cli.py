@@ -72,10 +72,38 @@ def cmd_import(args) -> int:
 
 
 def cmd_info(args) -> int:
+    from .cases.coverage import restrict_to_coverage
+    from .cases.io import case_warnings
     from .cases.summary import summarise
 
-    print(summarise(_read(args.case)))
+    case = _read(args.case)
+    print(summarise(case))
+    for w in case_warnings(case):
+        print(f"warning: {w}")
+    try:
+        note = restrict_to_coverage(case, source=str(args.case))[1]
+    except ValueError as exc:  # info still describes the file; the verbs that use the attitude will refuse it
+        note = f"{exc} (correct, compare, calibrate and diagnose refuse this case)"
+    if note:
+        print(f"warning: {note}")
     return 0
+
+
+def _prepare(path, say: bool = True):
+    """Read a case for a verb that uses the attitude: its warnings (printed when ``say``) and the
+    case restricted to what the attitude record covers (never extrapolated)."""
+    from .cases.coverage import restrict_to_coverage
+    from .cases.io import case_warnings
+
+    case = _read(path)
+    notes = case_warnings(case)
+    case, note = restrict_to_coverage(case, source=str(path))
+    if note:
+        notes.append(note)
+    if say:
+        for w in notes:
+            print(f"warning: {w}")
+    return case, notes
 
 
 from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
@@ -145,12 +173,16 @@ def cmd_correct(args) -> int:
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
     check_output_file(args.out, args.case, args.calibration)
-    case = _read(args.case)
-    result = _correct(case, args.method, _load_calibration(args.calibration), args.timing)
+    calibration = _load_calibration(args.calibration)
+    case, notes = _prepare(args.case)
+    result = _correct(case, args.method, calibration, args.timing)
+    if notes:
+        result.attrs["warnings"] = notes
     write_correction(result, args.out, source_case=str(args.case))
     v = result.vessel_velocity_m_s
+    speed = np.hypot(v[:, 0], v[:, 1])
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
-          f"mean horizontal speed {np.nanmean(np.hypot(v[:, 0], v[:, 1])):.4f} m/s, "
+          f"mean horizontal speed {np.nanmean(speed) if np.isfinite(speed).any() else float('nan'):.4f} m/s, "
           f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
     if result.attrs.get("installation_note"):
         print(f"warning: {result.attrs['installation_note']}")
@@ -161,12 +193,13 @@ def cmd_compare(args) -> int:
     """Every correction method on one case: the paper's metrics table and figures."""
     from .estimators.metrics import format_table, velocity_metrics
     from .cases.atomic import check_output_folder
+    from .cases.coverage import reference_at
     from .plots import velocity_figure
 
     if args.out:
         check_output_folder(args.out)
-    case = _read(args.case)
     calibration = _load_calibration(args.calibration)
+    case, notes = _prepare(args.case)
     methods = [m for m in CORRECTION_METHODS if m != "oracle" or case.truth is not None]
     if calibration is None:
         methods = [m for m in methods if m in ("asc", "oracle")]
@@ -179,9 +212,7 @@ def cmd_compare(args) -> int:
     if case.truth is not None:
         reference, label = case.truth.vessel_velocity_m_s, "truth"
     elif case.reference is not None and case.reference.velocity_m_s is not None:
-        ref = case.reference
-        reference = np.column_stack([np.interp(case.pings.time_s, ref.time_s, ref.velocity_m_s[:, j]) for j in range(3)])
-        label = "reference"
+        reference, label = reference_at(case, case.pings.time_s), "reference"
     else:
         raise ValueError(f"{args.case}: /truth or /reference: needed to compare methods against something")
     table = {m: velocity_metrics(r.time_s, r.vessel_velocity_m_s, reference) for m, r in results.items()}
@@ -192,10 +223,11 @@ def cmd_compare(args) -> int:
         print(f"{m}: not run: {why}")
     if args.out:
         from .cases.atomic import atomic_path
+        from .estimators.calibration import _jsonable
 
         out = Path(args.out)
         with atomic_path(out / f"{case.name}_compare.json") as tmp, open(tmp, "w") as fh:
-            json.dump({**table, "not_run": not_run}, fh, indent=2)
+            json.dump(_jsonable({**table, "not_run": not_run, "warnings": notes}), fh, indent=2)
         velocity_figure(case.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, reference,
                         f"{case.name}: corrections against {label}", out / f"{case.name}_compare.png")
         print(f"saved {out / (case.name + '_compare.png')}, {out / (case.name + '_compare.json')}")
@@ -229,10 +261,12 @@ def cmd_calibrate(args) -> int:
                                        ("at best", "fraction_at_best", 9, "{:.2f}".format)])
     args.case = args.case[0]
     check_output_file(args.out, args.case)
-    case = _read(args.case)
+    config = _calibration_config(args)
+    case, notes = _prepare(args.case, say=False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every warning is written into the result and printed below
-        result = CalibrationProblem(case, _calibration_config(args)).solve()
+        result = CalibrationProblem(case, config).solve()
+    result.warnings = notes + list(result.warnings)  # the case's own warnings first, in CALIB.json too
     result.to_json(args.out)
     ms = result.multistart
     print(f"{case.name}: {args.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
@@ -265,7 +299,7 @@ def cmd_compare_formulations(args) -> int:
 
     if args.out:
         check_output_file(args.out, args.case)
-    case = _read(args.case)
+    case, _ = _prepare(args.case)
     rows = compare_formulations(case, _calibration_config(args))
     print(format_rows(rows))
     if args.out:
@@ -361,8 +395,8 @@ def cmd_diagnose(args) -> int:
     from .estimators.diagnosis.report import table, write_report
 
     check_output_file(args.out, args.case, args.calibration)
-    case = _read(args.case)
     calibration = _load_calibration(args.calibration)
+    case, _ = _prepare(args.case)
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
                              attitude=args.attitude)
     result = diagnose(case, config, calibration=calibration)

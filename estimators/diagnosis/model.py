@@ -268,13 +268,12 @@ class GapModel:
             dLam = att_fun.map(L)(ca.DM(ref.time_s).T, p_rows(ref.time_s))[2]
             p_ref = hook("reference_point", ca.DM(np.asarray(ref.point_body_m, dtype=float)))
             v_ref = hook("reference_velocity", nav_velocity(ref.time_s), ctx)
-            ok = np.all(np.isfinite(ref.velocity_m_s), axis=1).astype(float)
             for j in range(3):
                 tang = ca.mtimes(ca.reshape(dLam[j, :], 3, L).T, p_ref)
                 models.append(v_ref[:, j] + tang - np.nan_to_num(ref.velocity_m_s[:, j]))
                 channels.append((f"reference_{AXES[j]}", L))
                 times_of.append(ref.time_s)
-                masks.append(ok)
+                masks.append(np.isfinite(ref.velocity_m_s[:, j]).astype(float))  # per axis: a NaN vertical masks only it
         self.channels = channels
         self.mask = np.concatenate(masks)
         self.times = np.concatenate(times_of)
