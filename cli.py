@@ -68,6 +68,8 @@ def cmd_import(args) -> int:
     warning = attrs.get("/attitude", {}).get("attitude_warning")
     if warning:
         print(f"warning: attitude: {warning}")
+    if prov.get("reader_messages"):
+        print(f"note: {prov['reader_messages']}")
     return 0
 
 
