@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import signal
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -14,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 DEFAULT_CASES = ("pool_m1", "pool_m2")
+TIMINGS = ("deep", "shallow", "exact")  # correct --timing
 
 
 def _read(path):
@@ -160,6 +163,8 @@ def cmd_correct(args) -> int:
     from .cases.collect import collect_case_paths, is_many
     from .cases.corrected import write_correction
 
+    if args.timing not in TIMINGS:
+        raise ValueError(f"--timing: expected one of {list(TIMINGS)}, got {args.timing!r}")
     if is_many(args.case):
         from .batch import CorrectJob, check_scheduler
 
@@ -380,7 +385,9 @@ def cmd_demo(args) -> int:
         summary[name] = table
         velocity_figure(case.pings.time_s, {m: results[m].vessel_velocity_m_s for m in ("asc", "adc", "oracle")}, vt,
                         f"{name} (seed {args.seed}): static vs dynamic correction", out / f"{name}_velocity.png")
-    with open(out / "metrics.json", "w") as fh:
+    from .cases.atomic import atomic_path
+
+    with atomic_path(out / "metrics.json") as tmp, open(tmp, "w") as fh:
         json.dump(summary, fh, indent=2)
     print(f"\nsaved in {out}/: calibration.json, attitude_fit.png, radius_vectors.png, "
           + ", ".join(f"{n}_velocity.png" for n in args.scenario) + ", metrics.json, corrected and case files")
@@ -449,8 +456,40 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _int_at_least(low: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < low:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}")
+        return value
+    return parse
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+_count, _seed = _int_at_least(1), _int_at_least(0)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage block): ``adcpdyn VERB: error: ...``."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="adcpdyn", description=__doc__)
+    p = _Parser(prog="adcpdyn", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("scenarios", help="list the built-in scenarios")
@@ -458,16 +497,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("simulate", help="simulate a scenario into a case file")
     s.add_argument("scenario")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_seed, default=0)
     s.add_argument("--out", required=True)
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("import", help="import a TRDI PD0 or Nortek AD2CP file into a case file")
     s.add_argument("file", help="instrument file (.PD0, .000, .ENS, .ENR, .ad2cp, ...)")
     s.add_argument("--out", required=True, help="CASE.h5 (never the input file)")
-    s.add_argument("--start", type=float, help="first ping to keep, seconds from the file's first ping")
-    s.add_argument("--end", type=float, help="last ping to keep, seconds from the file's first ping")
-    s.add_argument("--every", type=int, default=1, help="keep every n-th ping (decimation for long files)")
+    s.add_argument("--start", type=_finite, help="first ping to keep, seconds from the file's first ping")
+    s.add_argument("--end", type=_finite, help="last ping to keep, seconds from the file's first ping")
+    s.add_argument("--every", type=_count, default=1, help="keep every n-th ping (decimation for long files)")
     s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("info", help="summarise a case file")
@@ -477,7 +516,7 @@ def build_parser() -> argparse.ArgumentParser:
     def batch_options(s):
         s.add_argument("--scheduler", default="local",
                        help="many cases: local (a Dask LocalCluster, default), none (serial) or a scheduler address")
-        s.add_argument("--workers", type=int, default=None, help="many cases: LocalCluster worker processes")
+        s.add_argument("--workers", type=_count, default=None, help="many cases: LocalCluster worker processes")
 
     s = sub.add_parser("correct", help="correct every ping of a case (or of many: files, a folder or a glob)")
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
@@ -497,8 +536,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     def calibration_options(s):
         s.add_argument("--formulation", default="exact", help="paper | exact | minimal | free")
-        s.add_argument("--starts", type=int, default=24, help="multistart size")
-        s.add_argument("--seed", type=int, default=0, help="seed of the start design")
+        s.add_argument("--starts", type=_count, default=24, help="multistart size")
+        s.add_argument("--seed", type=_seed, default=0, help="seed of the start design")
         s.add_argument("--method", default="joint", help="joint | two-stage")
         s.add_argument("--timing", default="auto", help="auto | shallow | deep | exact bottom-track model")
         s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
@@ -528,8 +567,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--effects", nargs="+", help="catalog effects to try (default: all)")
     s.add_argument("--attitude", default="auto",
                    help="auto | model (damped-mode motion model) | samples (the sensor's samples, runs no model follows)")
-    s.add_argument("--selftest", type=int, metavar="N", help="blind self-test on N simulated cases")
-    s.add_argument("--seed", type=int, default=0, help="seed of the self-test draws")
+    s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
+    s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
     s.add_argument("--scenario", default="diag_boat", help="scenario the self-test simulates")
     s.set_defaults(func=cmd_diagnose)
 
@@ -542,8 +581,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="the main job on the built-in default case")
     s.add_argument("--scenario", nargs="+", default=list(DEFAULT_CASES), help="measurement runs to correct")
     s.add_argument("--calibration-scenario", default="pool_m0", help="calibration run")
-    s.add_argument("--starts", type=int, default=24)
-    s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--starts", type=_count, default=24)
+    s.add_argument("--seed", type=_seed, default=1)
     s.add_argument("--out", default="demo_out")
     s.set_defaults(func=cmd_demo)
     return p
@@ -575,21 +614,84 @@ def _one_line(exc: BaseException) -> str:
     return text or type(exc).__name__
 
 
+class _HeldStderr:
+    """File descriptor 2 held in a temporary file while a command runs.
+
+    Solver libraries (CasADi, IPOPT, LAPACK) write their own warnings straight to the
+    descriptor. A command that succeeds gets them back afterwards, in order; one that
+    ends in a one-line error drops them, so that the error is the only line.
+    """
+
+    def __init__(self):
+        self._saved = self._sink = None
+
+    def __enter__(self):
+        with contextlib.suppress(Exception):
+            sys.stderr.flush()
+        try:
+            self._saved = os.dup(2)
+            self._sink = tempfile.TemporaryFile()
+            os.dup2(self._sink.fileno(), 2)
+        except OSError:
+            self._saved = self._sink = None
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            with contextlib.suppress(Exception):
+                sys.stderr.flush()
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+        return False
+
+    def replay(self) -> None:
+        if self._sink is not None:
+            self._sink.seek(0)
+            data = self._sink.read()
+            if data:
+                with contextlib.suppress(Exception):
+                    sys.stderr.flush()
+                os.write(2, data)
+            self._sink.close()
+
+    def drop(self) -> None:
+        if self._sink is not None:
+            self._sink.close()
+
+
+def _holds_stderr(args) -> bool:
+    """Not for what shows progress on stderr: the self-test, benchmarks, many cases."""
+    from .cases.collect import is_many
+
+    if getattr(args, "selftest", None) or args.command in ("bench", "demo"):
+        return False
+    case = getattr(args, "case", None)
+    return not (isinstance(case, list) and is_many(case))
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    held = _HeldStderr() if _holds_stderr(args) else contextlib.nullcontext()
+    error = None
     try:
-        with _sigterm_as_exception():
-            return args.func(args)
+        with _sigterm_as_exception(), held:
+            code = args.func(args)
     except (ValueError, OSError) as exc:
         # CaseFormatError is a ValueError; every user-facing error is one line.
-        print(f"adcpdyn {args.command}: error: {_one_line(exc)}", file=sys.stderr)
-        return 2
+        error, code = f"adcpdyn {args.command}: error: {_one_line(exc)}", 2
     except Terminated as exc:
-        print(f"adcpdyn {args.command}: {exc}; stopped (no partial file left)", file=sys.stderr)
-        return 128 + signal.SIGTERM
+        error, code = f"adcpdyn {args.command}: {exc}; stopped (no partial file left)", 128 + signal.SIGTERM
     except KeyboardInterrupt:
-        print(f"adcpdyn {args.command}: interrupted; stopped (no partial file left)", file=sys.stderr)
-        return 128 + signal.SIGINT
+        error, code = f"adcpdyn {args.command}: interrupted; stopped (no partial file left)", 128 + signal.SIGINT
+    except BaseException:
+        if isinstance(held, _HeldStderr):
+            held.replay()
+        raise
+    if isinstance(held, _HeldStderr):
+        held.drop() if error else held.replay()
+    if error:
+        print(error, file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":

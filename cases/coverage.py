@@ -40,7 +40,8 @@ def restrict_to_coverage(case: Case, source: str | None = None,
        outside: refused.
     3. Reference samples outside the attitude record (+- tol) or the kept pings' span (+- one
        median reference or ping interval, the larger) are left out; none left: refused. A
-       reference with no finite horizontal velocity at all is left out entirely.
+       reference with no finite horizontal velocity at all is left out entirely, and so are
+       slant ranges that are all NaN (a channel without data is no channel).
 
     Parameters
     ----------
@@ -106,6 +107,11 @@ def restrict_to_coverage(case: Case, source: str | None = None,
         t = t[keep]
     if not complete.all():
         changes["attitude"] = a
+
+    pings = changes.get("pings", p)
+    if pings.bt_range_m is not None and not np.isfinite(pings.bt_range_m).any():
+        notes.append("/pings/bt_range_m: no finite slant range; left out")
+        changes["pings"] = dataclasses.replace(pings, bt_range_m=None)
 
     ref = case.reference
     if ref is not None and ref.time_s is not None and ref.velocity_m_s is not None:

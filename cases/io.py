@@ -54,8 +54,12 @@ BEAM_ANGLE_USUAL_RAD = (math.radians(10.0), math.radians(45.0))
 MIN_BEAM_SPAN = 0.05  # smallest singular value of the (4, 3) beam matrix: the beams must span 3-D
 MAX_SPEED_M_S = 20.0  # radial velocities (bottom track, water) and reference velocity components
 MAX_TRANSDUCER_RADIUS_M = 2.0
+FREQUENCY_RANGE_HZ = (1e3, 1e8)  # ADCPs: 38 kHz - 3 MHz
 MAX_DEPTH_M = 12000.0  # the deepest ocean is 11 km
 MAX_RANGE_OVER_DEPTH = 10.0  # a slant range more than 10 x the deepest bed is no range to that bed
+MAX_LEVER_ARM_M = 100.0  # body-frame positions (reference point): no vessel is larger
+_VESSEL_MAX = {"length_m": 500.0, "beam_m": 100.0, "height_m": 100.0, "draft_m": 50.0, "mass_kg": 1e9,
+               "displaced_volume_m3": 1e6}  # the largest ships afloat, with margin
 
 
 class CaseFormatError(ValueError):
@@ -245,7 +249,10 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
     tr = c.non_negative(ins.transducer_radius_m, _attr(g, "transducer_radius_m"))
     if tr > MAX_TRANSDUCER_RADIUS_M:
         c.fail(_attr(g, "transducer_radius_m"), f"expected metres <= {MAX_TRANSDUCER_RADIUS_M:g}, got {_num(tr)}")
-    c.positive(ins.frequency_hz, _attr(g, "frequency_hz"))
+    f0 = c.positive(ins.frequency_hz, _attr(g, "frequency_hz"))
+    if not FREQUENCY_RANGE_HZ[0] <= f0 <= FREQUENCY_RANGE_HZ[1]:
+        c.fail(_attr(g, "frequency_hz"), f"expected an acoustic frequency, {FREQUENCY_RANGE_HZ[0]:g}-"
+                                         f"{FREQUENCY_RANGE_HZ[1]:g} Hz, got {_num(f0)}")
     sound = c.positive(ins.sound_speed_m_s, _attr(g, "sound_speed_m_s"))
     lo, hi = SOUND_SPEED_RANGE_M_S
     if not (lo <= sound <= hi):
@@ -336,7 +343,10 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
     for name in _VESSEL_FIELDS:
         v = getattr(case.vessel, name)
         if v is not None:
-            c.positive(v, _attr("/vessel", name))
+            v = c.positive(v, _attr("/vessel", name))
+            if v > _VESSEL_MAX[name]:
+                c.fail(_attr("/vessel", name), f"expected a value <= {_VESSEL_MAX[name]:g} (larger than any ship), "
+                                               f"got {_num(v)}")
 
     # /water
     k = None
@@ -395,7 +405,9 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
         r = case.reference
         c.instance(r, Reference, "/reference")
         f = _attr("/reference", "point_body_m")
-        c.finite(c.shape(r.point_body_m, f, (3,)), f)
+        point = c.shape(r.point_body_m, f, (3,))
+        c.finite(point, f)
+        c.within(point, f, -MAX_LEVER_ARM_M, MAX_LEVER_ARM_M, f"metres within +-{MAX_LEVER_ARM_M:g} of G")
         if not isinstance(r.stationary, (bool, np.bool_)):
             c.fail(_attr("/reference", "stationary"), f"expected 0 or 1, got {_q(r.stationary)}")
         if not r.stationary:
@@ -423,13 +435,17 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
         tt = case.truth
         c.instance(tt, Truth, "/truth")
         f = "/truth/radius_vectors_m"
-        c.finite(c.shape(tt.radius_vectors_m, f, (4, 3)), f)
+        rv = c.shape(tt.radius_vectors_m, f, (4, 3))
+        c.finite(rv, f)
+        c.within(rv, f, -MAX_LEVER_ARM_M, MAX_LEVER_ARM_M, f"metres within +-{MAX_LEVER_ARM_M:g} of G")
         f = "/truth/installation_ypr_rad"
         ypr = c.shape(tt.installation_ypr_rad, f, (3,))
         c.finite(ypr, f)
         c.max_abs(ypr, f, math.pi, "|angle| <= pi")
         f = "/truth/vessel_velocity_m_s"
-        c.finite(c.shape(tt.vessel_velocity_m_s, f, (n, 3), "(N, 3)", n_from), f)
+        vt = c.shape(tt.vessel_velocity_m_s, f, (n, 3), "(N, 3)", n_from)
+        c.finite(vt, f)
+        c.within(vt, f, -MAX_SPEED_M_S, MAX_SPEED_M_S, f"velocity components within +-{MAX_SPEED_M_S:g} m/s")
         if tt.water_velocity_m_s is not None:
             f = "/truth/water_velocity_m_s"
             wv = c.array(tt.water_velocity_m_s, f)
@@ -439,6 +455,7 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
             elif wv.ndim != 3 or wv.shape[0] != n or wv.shape[2] != 3:
                 c.fail(f, f"expected shape (N, K, 3) {n_from}, got {wv.shape}")
             c.no_inf(wv, f)
+            c.within(wv, f, -MAX_SPEED_M_S, MAX_SPEED_M_S, f"velocity components within +-{MAX_SPEED_M_S:g} m/s or NaN")
         f = _attr("/truth", "effects")
         if not isinstance(tt.effects, list):
             c.fail(f, f"expected a JSON list, got {type(tt.effects).__name__}")
@@ -756,10 +773,14 @@ def read_case(path) -> Case:
     """
     source = os.fspath(path)
     rd = _Reader(source)
+    if not os.path.exists(source):
+        raise FileNotFoundError(f"{source}: no such file")
+    if os.path.isdir(source):
+        rd.c.fail("/", "expected an HDF5 file, got a folder")
     try:
         f = h5py.File(source, "r")
     except FileNotFoundError:
-        raise
+        raise FileNotFoundError(f"{source}: no such file") from None
     except OSError as exc:
         rd.c.fail("/", f"expected an HDF5 file, got an unreadable file ({exc})")
     with f:

@@ -25,7 +25,6 @@ velocity.
 from __future__ import annotations
 
 import dataclasses
-import json
 
 import numpy as np
 
@@ -232,7 +231,10 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     if method == "oracle":
         if case.truth is None or "attitude_model" not in case.truth.extra_attrs:
             raise ValueError(f"{case.name}: /truth: the oracle needs a case simulated by adcpdyn (true attitude model)")
-        attitude = AttitudeParams.from_dict(json.loads(case.truth.extra_attrs["attitude_model"]))
+        from .calibration_file import attitude_model_from
+
+        attitude = attitude_model_from(case.truth.extra_attrs["attitude_model"],
+                                       f'{case.name}: /truth.attrs["attitude_model"]')
         lever, ypr_st = case.truth.radius_vectors_m, case.truth.installation_ypr_rad  # vessel frame
     else:
         if calibration is None:

@@ -433,6 +433,25 @@ def nominal_installation(calibration) -> np.ndarray:
     return np.asarray(value, dtype=float)
 
 
+def attitude_model_from(value, where: str):
+    """An ``AttitudeParams`` from its dict (``AttitudeParams.to_dict``) or JSON text, checked as
+    CALIB.json's ``attitude_model`` is; ``where`` names it in the one-line error."""
+    from ..models.motion import AttitudeParams
+
+    if isinstance(value, (str, bytes)):
+        try:
+            value = json.loads(value)
+        except (json.JSONDecodeError, RecursionError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{where}: expected a JSON attitude model, got invalid JSON ({exc})") from None
+
+    def fail(path, expected, got):
+        expected = expected if expected.startswith("expected") else f"expected {expected}"
+        raise ValueError(f"{where}: {path}: {expected}, got {got}")
+
+    _check(Key("object", nulls=NONE, check=_attitude_model), value, "attitude_model", fail)
+    return AttitudeParams.from_dict(value)
+
+
 def heading_misalignment(calibration) -> float | None:
     """The heading misalignment in radians, or None when absent or not determined."""
     if calibration is None:

@@ -147,3 +147,23 @@ def test_read_only_folder_is_refused(tmp_path):
             check_output_file(ro / "x.h5")
     finally:
         ro.chmod(0o755)
+
+
+@pytest.mark.parametrize("fails", [True, False])
+def test_solver_chatter_on_the_descriptor_is_dropped_only_when_the_command_fails(tmp_path, capfd, monkeypatch, fails):
+    import adcpdyn.cli as cli
+
+    def chatty(args):
+        os.write(2, b'CasADi - WARNING("nlp_grad_f failed: NaN detected")\nanother line\n')
+        if fails:
+            raise ValueError("case.h5: /pings/bt_range_m: expected slant ranges > 0, got -1.0")
+        print("summary")
+        return 0
+
+    monkeypatch.setattr(cli, "cmd_info", chatty)
+    assert main(["info", "case.h5"]) == (2 if fails else 0)
+    out, err = capfd.readouterr()
+    if fails:
+        assert err == "adcpdyn info: error: case.h5: /pings/bt_range_m: expected slant ranges > 0, got -1.0\n"
+    else:
+        assert "NaN detected" in err and "another line" in err and out == "summary\n"
