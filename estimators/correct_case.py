@@ -49,5 +49,9 @@ def correct_case(case: Case, method: str, calibration: dict | None, timing: str 
         result = asc(with_heading_misalignment(case, calibration), ypr)
         if note:
             result.attrs["installation_note"] = note
-        return result
-    return dynamic_correction(case, method, calibration, timing=timing)
+    else:
+        result = dynamic_correction(case, method, calibration, timing=timing)
+    if not np.any(result.beams_used >= 3):
+        raise ValueError(f"{case.name}: /pings/bt_radial_m_s: expected pings with at least 3 valid beams (a velocity "
+                         f"needs 3), got none of {case.pings.n}")
+    return result

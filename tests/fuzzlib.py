@@ -285,6 +285,26 @@ def case_variants(base: Path, folder: Path, water: bool = False) -> list[Variant
     for name, edit in valid:
         add(name, edit, "ok", ())
 
+    def first(n):
+        def edit(f):
+            for p in ("/pings/time_s", "/pings/bt_radial_m_s", "/pings/bt_range_m", "/truth/vessel_velocity_m_s"):
+                _replace(p, lambda a: a[:n])(f)
+        return edit
+
+    def two_beams(a):
+        a = np.array(a)
+        a[::2, :2] = np.nan
+        a[1::2, 2:] = np.nan
+        return a
+
+    for name, edit, fields in (  # valid files that some verbs cannot use: a right answer or a one-line error
+            ("only 2 pings", first(2), ("/pings/time_s",)),
+            ("one ping", first(1), ("/pings/time_s",)),
+            ("two beams per ping", _replace("/pings/bt_radial_m_s", two_beams), ("/pings/bt_radial_m_s",)),
+            ("attitude never changes", lambda f: [_replace(f"/attitude/{k}", np.zeros_like)(f)
+                                                  for k in ("heading_rad", "pitch_rad", "roll_rad")], ("/attitude",))):
+        add(name, edit, "either", fields)
+
     damaged = [("empty file", b""), ("not HDF5", b"hello, world\n"), ("random bytes", bytes(random.Random(1).randbytes(4096))),
                ("truncated HDF5", base.read_bytes()[: base.stat().st_size // 2])]
     for name, data in damaged:

@@ -31,6 +31,7 @@ from . import where as where_mod
 from .model import GROUPS, Fit, GapModel, base_attitude, group_of, initial_noise, residual_peaks
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt")
+MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 
 
 @dataclass(frozen=True)
@@ -241,6 +242,9 @@ def diagnose(case: Case, config: DiagnosisConfig = DiagnosisConfig(), calibratio
         from ..calibration_file import as_calibration
 
         calibration = as_calibration(calibration)
+    if case.pings.n < MIN_PINGS:
+        raise ValueError(f"{case.name}: /pings/time_s: expected at least {MIN_PINGS} pings for the gap diagnosis "
+                         f"(residuals held out in time blocks), got {case.pings.n}")
     ypr = case.attitude.ypr()
     if ypr.shape[0] < 3 or np.all(np.ptp(ypr, axis=0) == 0):
         raise ValueError(f"{case.name}: /attitude: heading, pitch and roll never change (no attitude recorded?); "
