@@ -26,7 +26,8 @@ from typing import Callable
 import numpy as np
 
 __all__ = ["KEYS", "SCHEMA_VERSIONS", "Calibration", "read_calibration", "validate_calibration", "as_calibration", "lever_arms",
-           "installation_angles", "nominal_installation", "heading_misalignment", "calibration_source"]
+           "installation_angles", "nominal_installation", "heading_misalignment", "moving_bed_velocity",
+           "attitude_model_from", "calibration_source"]
 
 SCHEMA_VERSIONS = (1, 2)
 MAX_LEVER_ARM_M = 100.0  # a transducer 100 m from the centre of rotation: no vessel carries one
@@ -67,12 +68,18 @@ class Key:
     check: Callable | None = None
 
 
-def _sin_cos(value, path, fail):
-    if set(value) != {"sin", "cos"}:
-        fail(path, 'expected an object {"sin": number, "cos": number} or null', _show(value))
-    for k in ("sin", "cos"):
-        _check(Key("number", nulls=NONE, low=-MAX_COMPASS_DEVIATION_RAD, high=MAX_COMPASS_DEVIATION_RAD, unit="rad"),
-               value[k], f"{path}.{k}", fail)
+def _sin_cos(low: float, high: float, extra: dict | None = None):
+    """An object {"sin": number, "cos": number} (each null when not determined); ``extra`` keys
+    are checked when present, others ignored."""
+    def check(value, path, fail):
+        for k in ("sin", "cos"):
+            if k not in value:
+                fail(path, 'expected an object {"sin": number, "cos": number} or null', _show(value))
+            _check(Key("number", low=low, high=high, unit="rad"), value[k], f"{path}.{k}", fail)
+        for k, spec in (extra or {}).items():
+            if k in value:
+                _check(spec, value[k], f"{path}.{k}", fail)
+    return check
 
 
 def _norm_at_most(limit: float, unit: str):
@@ -142,7 +149,8 @@ def _runs(value, path, fail):
         if not isinstance(run, dict):
             fail(p, 'expected an object {"case": ..., ...}', _show(run))
         _check(Key("string", nulls=NONE), _member(run, "case", p, fail), f"{p}.case", fail)
-        for k in ("moving_bed_velocity_m_s", "moving_bed_velocity_se_m_s"):
+        for k in ("moving_bed_velocity_m_s", "moving_bed_velocity_se_m_s", "attitude_model", "attitude_source",
+                  "velocity_model"):
             if k in run:
                 _check(KEYS[k], run[k], f"{p}.{k}", fail)
 
@@ -181,10 +189,17 @@ KEYS: dict[str, Key] = {
     # keys of the multi-run calibration (schema version 2)
     "moving_bed_velocity_m_s": Key("array", (2,), ELEMENTS, -MAX_MOVING_BED_M_S, MAX_MOVING_BED_M_S, "m/s",
                                    check=_norm_at_most(MAX_MOVING_BED_M_S, "m/s")),
-    "moving_bed_velocity_se_m_s": Key("array", (2,), VALUE, 0.0, math.inf, "m/s"),
-    "compass_deviation_rad": Key("object", check=_sin_cos),
+    "moving_bed_velocity_se_m_s": Key("array", (2,), ELEMENTS, 0.0, math.inf, "m/s"),
+    "moving_bed": Key("object"),
+    "compass_deviation_rad": Key("object", check=_sin_cos(
+        -MAX_COMPASS_DEVIATION_RAD, MAX_COMPASS_DEVIATION_RAD,
+        {"mean_sin": Key("number", low=-1.0, high=1.0), "mean_cos": Key("number", low=-1.0, high=1.0)})),
+    "compass_deviation_se_rad": Key("object", check=_sin_cos(0.0, math.inf)),
     "magnetic_declination_rad": Key("number", low=-math.pi, high=math.pi, unit="rad"),
+    "magnetic_declination_note": Key("string"),
     "compass_error_rad": Key("number", low=-TWO_PI, high=TWO_PI, unit="rad"),
+    "standard_errors": Key("object"),
+    "confounded": Key("list"),
     "runs": Key("list", check=_runs),
 }
 
@@ -450,6 +465,24 @@ def attitude_model_from(value, where: str):
 
     _check(Key("object", nulls=NONE, check=_attitude_model), value, "attitude_model", fail)
     return AttitudeParams.from_dict(value)
+
+
+def moving_bed_velocity(calibration, case_name: str) -> tuple[np.ndarray | None, str]:
+    """The bed velocity (north, east) a calibration found under a case's pings, and where it came
+    from: the case's own entry of ``runs``, else the calibration's site bed, else ``(None, "")``
+    (no bed estimated, or a component not determined: null)."""
+    def vector(value):
+        return None if value is None or any(v is None for v in value) else np.asarray(value, dtype=float)
+
+    if calibration is None:
+        return None, ""
+    own = next((r for r in calibration.get("runs") or [] if r.get("case") == case_name), None)
+    if own is not None and vector(own.get("moving_bed_velocity_m_s")) is not None:
+        return vector(own["moving_bed_velocity_m_s"]), f"run {case_name!r} of the calibration"
+    bed = vector(calibration.get("moving_bed_velocity_m_s"))
+    if bed is None:
+        return None, ""
+    return bed, "the calibration's site bed (this case is not one of its runs)"
 
 
 def heading_misalignment(calibration) -> float | None:

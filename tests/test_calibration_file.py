@@ -172,3 +172,30 @@ def test_every_key_of_the_table_is_checked():
             continue
         with pytest.raises(ValueError, match=rf"^calibration src: {key}: expected "):
             validate_calibration({"radius_vectors_m": None, key: wrong[spec.kind]}, "src")
+
+
+def test_what_the_multi_run_writer_emits_is_valid():
+    """The shape of a schema-2 CALIB.json of a joint survey calibration (keys as its writer emits
+    them, undetermined numbers null), and the bed each run is corrected with."""
+    from adcpdyn.estimators.calibration_file import moving_bed_velocity
+
+    d = {"schema_version": 2, "radius_vectors_m": [[0.1, 0.0, 0.5]] * 4, "radius_vectors_head_m": [[None] * 3] * 4,
+         "installation_ypr_rad": [0.2, None, None], "heading_misalignment_rad": 0.2, "heading_misalignment_se_rad": None,
+         "magnetic_declination_rad": 0.27, "magnetic_declination_note": "IGRF-14", "compass_error_rad": -0.07,
+         "compass_deviation_rad": {"sin": 0.004, "cos": None, "mean_sin": 0.68, "mean_cos": -0.16},
+         "compass_deviation_se_rad": {"sin": 0.017, "cos": None}, "moving_bed": {"model": "section", "velocity_m_s": []},
+         "moving_bed_velocity_m_s": [0.05, -0.15], "moving_bed_velocity_se_m_s": [0.02, None],
+         "standard_errors": {"method": "newey-west"}, "confounded": [],
+         "runs": [{"case": "run01", "n_pings": 231, "moving_bed_velocity_m_s": [0.04, None],
+                   "moving_bed_velocity_se_m_s": None, "heading_deg": {"mean": 20.0, "circular_sd": 1.0}},
+                  {"case": "run02", "moving_bed_velocity_m_s": [0.06, -0.14]}]}
+    calib = validate_calibration(d, "survey.json")
+    assert moving_bed_velocity(calib, "run02")[0].tolist() == [0.06, -0.14]
+    bed, source = moving_bed_velocity(calib, "run01")  # its own bed is not determined: the site's
+    assert bed.tolist() == [0.05, -0.15] and "site" in source
+    assert moving_bed_velocity({**calib, "moving_bed_velocity_m_s": [None, 0.1]}, "other") == (None, "")
+    with pytest.raises(ValueError, match=r"^calibration survey.json: compass_deviation_rad.mean_sin: expected"):
+        validate_calibration({**d, "compass_deviation_rad": {"sin": 0.0, "cos": 0.0, "mean_sin": 3.0}}, "survey.json")
+    with pytest.raises(ValueError, match=r"^calibration survey.json: runs\[1\].moving_bed_velocity_m_s\[0\]: expected"):
+        validate_calibration({**d, "runs": [d["runs"][0], {"case": "run02", "moving_bed_velocity_m_s": [9.0, 0.0]}]},
+                             "survey.json")

@@ -190,3 +190,21 @@ def test_unusual_values_are_warnings_in_the_output(m1, tmp_path, capsys):
     assert 'warning: /instrument.attrs["sound_speed_m_s"]: 1350 m/s is outside the usual' in out
     assert main(["correct", str(path), "--out", str(tmp_path / "c.h5")]) == 0
     assert any("sound_speed_m_s" in w for w in read_correction(tmp_path / "c.h5")["settings"]["warnings"])
+
+
+def test_reference_record_far_longer_than_the_pings_is_trimmed_before_calibrating(m1, tmp_path):
+    """GNSS logged for hours around a short ADCP run: the calibration sees only the samples over
+    the pings (its velocity knots span the pings, not 1e4 s), and CALIB.json says how many were left out."""
+    case = shortened(m1, 20.0)
+    r = case.reference
+    dt = float(np.median(np.diff(r.time_s)))
+    extra = r.time_s[-1] + dt * (1 + np.arange(int(1e4 / dt)))
+    longer = dataclasses.replace(r, time_s=np.r_[r.time_s, extra],
+                                 velocity_m_s=np.r_[r.velocity_m_s, np.tile(r.velocity_m_s[-1], (extra.size, 1))])
+    path = tmp_path / "long_gnss.h5"
+    write_case(case.replace(reference=longer), path)
+    kept, note = restrict_to_coverage(read_case(path))
+    assert kept.reference.time_s[-1] <= kept.pings.time_s[-1] + 2 * dt and f"of {longer.time_s.size} reference" in note
+    out = tmp_path / "calib.json"
+    assert main(["calibrate", str(path), "--starts", "1", "--out", str(out)]) in (0, 1)
+    assert any("reference samples outside the pings' span" in w for w in json.loads(out.read_text())["warnings"])
