@@ -41,40 +41,53 @@ class CorrectJob:
     timing: str = "deep"
 
 
+def _read_covered(path: str):
+    """The case restricted to what its attitude record covers, and its warnings (as the one-case verbs)."""
+    from .cases.coverage import restrict_to_coverage
+    from .cases.io import case_warnings, read_case
+
+    case = read_case(path)
+    notes = case_warnings(case)
+    case, note = restrict_to_coverage(case, source=path)
+    return case, notes + ([note] if note else [])
+
+
 def _calibrate(job: CalibrateJob) -> dict:
-    from .cases.io import read_case
     from .estimators.calibration import CalibrationProblem
 
-    case = read_case(job.case_path)
+    case, notes = _read_covered(job.case_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # warnings are written into the result
         r = CalibrationProblem(case, job.config).solve()
+    r.warnings = notes + list(r.warnings)
     r.to_json(job.out_path)
     ms = r.multistart
     return {"success": r.success, "objective": r.objective, "max_constraint_violation": r.max_constraint_violation,
             "fraction_at_best": ms.fraction_at_best, "iterations": ms.iterations,
             "lever_arms_sensor_m": r.lever_arms_sensor_m.tolist(), "installation_ypr_rad": r.installation_ypr_rad.tolist(),
-            "warnings": len(r.warnings)}
+            "warnings": len(r.warnings), "case_warnings": notes}
 
 
 def _correct(job: CorrectJob) -> dict:
     import numpy as np
 
     from .cases.corrected import write_correction
-    from .cases.io import read_case
+    from .estimators.calibration_file import read_calibration
     from .estimators.correct_case import as_calibrated_run, correct_case
 
-    calibration = None
-    if job.calibration_path is not None:
-        with open(job.calibration_path) as fh:
-            calibration = json.load(fh)
-    case = as_calibrated_run(read_case(job.case_path), job.case_path, calibration)
+    calibration = None if job.calibration_path is None else read_calibration(job.calibration_path)
+    case, notes = _read_covered(job.case_path)
+    case = as_calibrated_run(case, job.case_path, calibration)
     result = correct_case(case, job.method, calibration, job.timing)
+    if notes:
+        result.attrs["warnings"] = notes
     write_correction(result, job.out_path, source_case=job.case_path)
     v = result.vessel_velocity_m_s
+    speed = np.hypot(v[:, 0], v[:, 1])
     return {"success": True, "method": result.method, "pings": len(v),
-            "mean_horizontal_speed_m_s": float(np.nanmean(np.hypot(v[:, 0], v[:, 1]))),
-            "three_beam": int(np.sum(result.beams_used == 3)), "lost": int(np.sum(result.beams_used < 3))}
+            "mean_horizontal_speed_m_s": float(np.nanmean(speed)) if np.isfinite(speed).any() else float("nan"),
+            "three_beam": int(np.sum(result.beams_used == 3)), "lost": int(np.sum(result.beams_used < 3)),
+            "warnings": notes}
 
 
 def run_job(job) -> dict:

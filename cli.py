@@ -3,14 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
+import signal
 import sys
+import tempfile
+import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
 DEFAULT_CASES = ("pool_m1", "pool_m2")
+TIMINGS = ("deep", "shallow", "exact")  # correct --timing
 
 
 def _read(path):
@@ -34,6 +40,7 @@ def cmd_scenarios(args) -> int:
 def cmd_simulate(args) -> int:
     from .cases.io import write_case
     from .cases.scenario import get_scenario
+    from .cases.atomic import check_output_file
     from .models.simulator import simulate
 
     survey_options = {"--compass-deg": args.compass_deg, "--bed-speed": args.bed_speed, "--bed-profile": args.bed_profile}
@@ -41,6 +48,7 @@ def cmd_simulate(args) -> int:
         given = [k for k, v in survey_options.items() if v is not None]
         if given:
             raise ValueError(f"{given[0]}: only with --runs (a survey's transects)")
+        check_output_file(args.out)
         case = simulate(get_scenario(args.scenario), seed=args.seed)
         write_case(case, args.out)
         print(f"wrote {args.out}: {case.pings.n} pings, {case.attitude.time_s.size} attitude samples")
@@ -50,14 +58,13 @@ def cmd_simulate(args) -> int:
 
 def _simulate_survey(args) -> int:
     """``--runs K``: the survey's K transects, ``OUT/NAME_run01.h5`` ..., and what they share."""
+    from .cases.atomic import check_output_folder
     from .cases.io import write_case
     from .cases.survey import is_survey, simulate_survey, survey_names
 
     if not is_survey(args.scenario):
         raise ValueError(f"--runs: scenario {args.scenario!r} is not a survey; surveys: {survey_names()}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out: {out} is a file; with --runs --out names a folder (one case per transect)")
+    out = check_output_folder(args.out)
     compass = None if args.compass_deg is None else tuple(np.deg2rad(args.compass_deg))
     cases = simulate_survey(args.scenario, args.runs, args.seed, compass_rad=compass, bed_speed_m_s=args.bed_speed,
                             bed_profile=args.bed_profile)
@@ -80,9 +87,11 @@ def _simulate_survey(args) -> int:
 
 def cmd_import(args) -> int:
     """A real instrument file (TRDI PD0, Nortek AD2CP) into a case file, with its audit trail."""
+    from .cases.atomic import check_output_file
     from .cases.importers import Window, import_file, write_imported
 
     path = Path(args.file)
+    check_output_file(args.out, path)
     case, attrs = import_file(path, Window(start_s=args.start, end_s=args.end, every=args.every))
     write_imported(case, attrs, args.out, source=path)
     prov = attrs["/provenance"]
@@ -101,14 +110,44 @@ def cmd_import(args) -> int:
     warning = attrs.get("/attitude", {}).get("attitude_warning")
     if warning:
         print(f"warning: attitude: {warning}")
+    if prov.get("reader_messages"):
+        print(f"note: {prov['reader_messages']}")
     return 0
 
 
 def cmd_info(args) -> int:
+    from .cases.coverage import restrict_to_coverage
+    from .cases.io import case_warnings
     from .cases.summary import summarise
 
-    print(summarise(_read(args.case)))
+    case = _read(args.case)
+    print(summarise(case))
+    for w in case_warnings(case):
+        print(f"warning: {w}")
+    try:
+        note = restrict_to_coverage(case, source=str(args.case))[1]
+    except ValueError as exc:  # info still describes the file; the verbs that use the attitude will refuse it
+        note = f"{exc} (correct, compare, calibrate and diagnose refuse this case)"
+    if note:
+        print(f"warning: {note}")
     return 0
+
+
+def _prepare(path, say: bool = True):
+    """Read a case for a verb that uses the attitude: its warnings (printed when ``say``) and the
+    case restricted to what the attitude record covers (never extrapolated)."""
+    from .cases.coverage import restrict_to_coverage
+    from .cases.io import case_warnings
+
+    case = _read(path)
+    notes = case_warnings(case)
+    case, note = restrict_to_coverage(case, source=str(path))
+    if note:
+        notes.append(note)
+    if say:
+        for w in notes:
+            print(f"warning: {w}")
+    return case, notes
 
 
 from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
@@ -117,18 +156,20 @@ from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
 def _load_calibration(path):
-    if path is None:
-        return None
-    with open(path) as fh:
-        return json.load(fh)
+    """The validated CALIB.json of --calibration (None without one)."""
+    from .estimators.calibration_file import read_calibration
+
+    return None if path is None else read_calibration(path)
 
 
 def _batch_out(args) -> Path:
+    """--out of many cases: a folder (created when its parent exists), checked before any work."""
+    from .cases.atomic import check_output_folder
+
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out: {out} is a file; with many cases --out names a folder (one output per case)")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
+    return check_output_folder(out)
 
 
 def _run_batch(args, jobs, columns) -> int:
@@ -158,10 +199,12 @@ def _run_batch(args, jobs, columns) -> int:
 
 
 def cmd_correct(args) -> int:
-    from .cases.atomic import refuse_overwrite_input
+    from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
     from .cases.corrected import write_correction
 
+    if args.timing not in TIMINGS:
+        raise ValueError(f"--timing: expected one of {list(TIMINGS)}, got {args.timing!r}")
     if is_many(args.case):
         from .batch import CorrectJob, check_scheduler
 
@@ -169,20 +212,25 @@ def cmd_correct(args) -> int:
         if args.method not in CORRECTION_METHODS:
             raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {args.method!r}")
         paths, out = collect_case_paths(args.case), _batch_out(args)
+        _load_calibration(args.calibration)  # a bad file is one error here, not one per case
         calib = str(Path(args.calibration).resolve()) if args.calibration else None
         jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing)
                 for p in paths]
         return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
-    refuse_overwrite_input(args.out, args.case, args.calibration)
+    check_output_file(args.out, args.case, args.calibration)
     calibration = _load_calibration(args.calibration)
-    case = as_calibrated_run(_read(args.case), args.case, calibration)
+    case, notes = _prepare(args.case)
+    case = as_calibrated_run(case, args.case, calibration)
     result = _correct(case, args.method, calibration, args.timing)
+    if notes:
+        result.attrs["warnings"] = notes
     write_correction(result, args.out, source_case=str(args.case))
     v = result.vessel_velocity_m_s
+    speed = np.hypot(v[:, 0], v[:, 1])
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
-          f"mean horizontal speed {np.nanmean(np.hypot(v[:, 0], v[:, 1])):.4f} m/s, "
+          f"mean horizontal speed {np.nanmean(speed) if np.isfinite(speed).any() else float('nan'):.4f} m/s, "
           f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
     for key in ("installation_note", "moving_bed_note"):
         if result.attrs.get(key):
@@ -193,10 +241,15 @@ def cmd_correct(args) -> int:
 def cmd_compare(args) -> int:
     """Every correction method on one case: the paper's metrics table and figures."""
     from .estimators.metrics import format_table, velocity_metrics
+    from .cases.atomic import check_output_folder
+    from .cases.coverage import reference_at
     from .plots import velocity_figure
 
+    if args.out:
+        check_output_folder(args.out)
     calibration = _load_calibration(args.calibration)
-    case = as_calibrated_run(_read(args.case), args.case, calibration)
+    case, notes = _prepare(args.case)
+    case = as_calibrated_run(case, args.case, calibration)
     methods = [m for m in CORRECTION_METHODS if m != "oracle" or case.truth is not None]
     if calibration is None:
         methods = [m for m in methods if m in ("asc", "oracle")]
@@ -209,9 +262,7 @@ def cmd_compare(args) -> int:
     if case.truth is not None:
         reference, label = case.truth.vessel_velocity_m_s, "truth"
     elif case.reference is not None and case.reference.velocity_m_s is not None:
-        ref = case.reference
-        reference = np.column_stack([np.interp(case.pings.time_s, ref.time_s, ref.velocity_m_s[:, j]) for j in range(3)])
-        label = "reference"
+        reference, label = reference_at(case, case.pings.time_s), "reference"
     else:
         raise ValueError(f"{args.case}: /truth or /reference: needed to compare methods against something")
     table = {m: velocity_metrics(r.time_s, r.vessel_velocity_m_s, reference) for m, r in results.items()}
@@ -222,11 +273,11 @@ def cmd_compare(args) -> int:
         print(f"{m}: not run: {why}")
     if args.out:
         from .cases.atomic import atomic_path
+        from .estimators.calibration import _jsonable
 
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
         with atomic_path(out / f"{case.name}_compare.json") as tmp, open(tmp, "w") as fh:
-            json.dump({**table, "not_run": not_run}, fh, indent=2)
+            json.dump(_jsonable({**table, "not_run": not_run, "warnings": notes}), fh, indent=2)
         velocity_figure(case.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, reference,
                         f"{case.name}: corrections against {label}", out / f"{case.name}_compare.png")
         print(f"saved {out / (case.name + '_compare.png')}, {out / (case.name + '_compare.json')}")
@@ -293,7 +344,7 @@ def _print_calibration(result, title: str) -> None:
 def cmd_calibrate(args) -> int:
     import warnings
 
-    from .cases.atomic import refuse_overwrite_input
+    from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
     from .estimators.calibration import CalibrationProblem
 
@@ -307,21 +358,19 @@ def cmd_calibrate(args) -> int:
         return _run_batch(args, jobs, [("objective", "objective", 12, "{:.6g}".format),
                                        ("max viol", "max_constraint_violation", 10, "{:.1e}".format),
                                        ("at best", "fraction_at_best", 9, "{:.2f}".format)])
-    if args.joint:
-        paths = collect_case_paths(args.case)
-        refuse_overwrite_input(args.out, *paths)
-        cases = [_read(p) for p in paths]
-        if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
-            cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
-        title = f"{len(cases)} runs ({', '.join(c.name for c in cases)}), one NLP"
-    else:
-        args.case = args.case[0]
-        refuse_overwrite_input(args.out, args.case)
-        cases = _read(args.case)
-        title = cases.name
+    paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
+    check_output_file(args.out, *paths)
+    config = _calibration_config(args)
+    prepared = [_prepare(p, say=False) for p in paths]
+    cases = [c for c, _ in prepared]
+    notes = [n for _, ns in prepared for n in ns]
+    if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
+        cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
+    title = f"{len(cases)} runs ({', '.join(c.name for c in cases)}), one NLP" if args.joint else cases[0].name
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every warning is written into the result and printed below
-        result = CalibrationProblem(cases, _calibration_config(args)).solve()
+        result = CalibrationProblem(cases if args.joint else cases[0], config).solve()
+    result.warnings = notes + list(result.warnings)  # the cases' own warnings first, in CALIB.json too
     result.to_json(args.out)
     _print_calibration(result, title)
     print(f"wrote {args.out}")
@@ -329,9 +378,12 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_compare_formulations(args) -> int:
+    from .cases.atomic import check_output_file
     from .estimators.formulation_compare import compare_formulations, format_rows
 
-    case = _read(args.case)
+    if args.out:
+        check_output_file(args.out, args.case)
+    case, _ = _prepare(args.case)
     rows = compare_formulations(case, _calibration_config(args))
     print(format_rows(rows))
     if args.out:
@@ -356,8 +408,10 @@ def cmd_demo(args) -> int:
     from .models.simulator import simulate
     from .plots import attitude_fit_figure, radius_vectors_figure, velocity_figure
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    from .cases.atomic import check_output_folder
+
+    out = check_output_folder(args.out)
+    out.mkdir(exist_ok=True)
     cases = {}
     for name in (args.calibration_scenario, *args.scenario):
         case = simulate(get_scenario(name), seed=args.seed)
@@ -390,7 +444,7 @@ def cmd_demo(args) -> int:
     radius_vectors_figure(calib.lever_arms_sensor_m, calib.lever_arms_sensor_se_m, truth, label, out / "radius_vectors.png")
 
     # 2. measurement runs: every correction method against truth (the paper's Tables 8 and 12)
-    calibration = json.loads((out / "calibration.json").read_text())
+    calibration = _load_calibration(out / "calibration.json")
     summary = {"calibration": err}
     for name in args.scenario:
         case = cases[name]
@@ -408,7 +462,9 @@ def cmd_demo(args) -> int:
         summary[name] = table
         velocity_figure(case.pings.time_s, {m: results[m].vessel_velocity_m_s for m in ("asc", "adc", "oracle")}, vt,
                         f"{name} (seed {args.seed}): static vs dynamic correction", out / f"{name}_velocity.png")
-    with open(out / "metrics.json", "w") as fh:
+    from .cases.atomic import atomic_path
+
+    with atomic_path(out / "metrics.json") as tmp, open(tmp, "w") as fh:
         json.dump(summary, fh, indent=2)
     print(f"\nsaved in {out}/: calibration.json, attitude_fit.png, radius_vectors.png, "
           + ", ".join(f"{n}_velocity.png" for n in args.scenario) + ", metrics.json, corrected and case files")
@@ -420,7 +476,7 @@ def cmd_diagnose(args) -> int:
         return _diagnose_selftest(args)
     if not args.case or not args.out:
         raise ValueError("diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)")
-    from .cases.atomic import refuse_overwrite_input
+    from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
     from .estimators.diagnosis.diagnose import DiagnosisConfig, diagnose
     from .estimators.diagnosis.report import table, write_report
@@ -428,9 +484,9 @@ def cmd_diagnose(args) -> int:
     if is_many(args.case) and not args.joint:
         raise ValueError("diagnose: several cases: add --joint to diagnose them together (one boat, shared and per-run effects)")
     paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
-    refuse_overwrite_input(args.out, *paths, args.calibration)
+    check_output_file(args.out, *paths, args.calibration)
     calibration = _load_calibration(args.calibration)
-    cases = [as_calibrated_run(_read(p), p, calibration) for p in paths]
+    cases = [as_calibrated_run(_prepare(p)[0], p, calibration) for p in paths]
     if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
         cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
@@ -446,11 +502,13 @@ def cmd_diagnose(args) -> int:
 def _diagnose_selftest(args) -> int:
     from tqdm import tqdm
 
-    from .cases.atomic import atomic_path
+    from .cases.atomic import atomic_path, check_output_file
     from .estimators.calibration import _jsonable
     from .estimators.diagnosis.diagnose import DiagnosisConfig
     from .estimators.diagnosis.selftest import draw_cases, format_summary, run_one, summarise
 
+    if args.out:
+        check_output_file(args.out)
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
     draws = draw_cases(args.selftest, args.seed, config.effects)
     rows = []
@@ -474,14 +532,48 @@ def _diagnose_selftest(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    from .cases.atomic import check_output_folder
     from .solvers.bench import run
 
+    check_output_folder(args.out)
     run(args.suite, args.quick, Path(args.out))
     return 0
 
 
+def _int_at_least(low: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < low:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}")
+        return value
+    return parse
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+_count, _seed = _int_at_least(1), _int_at_least(0)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage block): ``adcpdyn VERB: error: ...``."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see `{self.prog} --help`)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="adcpdyn", description=__doc__)
+    p = _Parser(prog="adcpdyn", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("scenarios", help="list the built-in scenarios")
@@ -489,21 +581,22 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("simulate", help="simulate a scenario into a case file (a survey's transects with --runs)")
     s.add_argument("scenario")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_seed, default=0)
     s.add_argument("--out", required=True, help="CASE.h5; with --runs a folder (NAME_run01.h5, ...)")
-    s.add_argument("--runs", type=int, help="a survey's number of transects (alternating banks; seeds SEED, SEED+1, ...)")
-    s.add_argument("--compass-deg", type=float, nargs=3, metavar=("A", "B", "C"),
+    s.add_argument("--runs", type=_count,
+                   help="a survey's number of transects (alternating banks; seeds SEED, SEED+1, ...)")
+    s.add_argument("--compass-deg", type=_finite, nargs=3, metavar=("A", "B", "C"),
                    help="survey: fix the compass deviation (heading reads psi + A + B sin psi + C cos psi); default drawn")
-    s.add_argument("--bed-speed", type=float, help="survey: fix the moving bed's speed downstream, m/s; default drawn")
+    s.add_argument("--bed-speed", type=_finite, help="survey: fix the moving bed's speed downstream, m/s; default drawn")
     s.add_argument("--bed-profile", choices=["uniform", "parabolic"], help="survey: bed speed across the section")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser("import", help="import a TRDI PD0 or Nortek AD2CP file into a case file")
     s.add_argument("file", help="instrument file (.PD0, .000, .ENS, .ENR, .ad2cp, ...)")
     s.add_argument("--out", required=True, help="CASE.h5 (never the input file)")
-    s.add_argument("--start", type=float, help="first ping to keep, seconds from the file's first ping")
-    s.add_argument("--end", type=float, help="last ping to keep, seconds from the file's first ping")
-    s.add_argument("--every", type=int, default=1, help="keep every n-th ping (decimation for long files)")
+    s.add_argument("--start", type=_finite, help="first ping to keep, seconds from the file's first ping")
+    s.add_argument("--end", type=_finite, help="last ping to keep, seconds from the file's first ping")
+    s.add_argument("--every", type=_count, default=1, help="keep every n-th ping (decimation for long files)")
     s.set_defaults(func=cmd_import)
 
     s = sub.add_parser("info", help="summarise a case file")
@@ -513,7 +606,7 @@ def build_parser() -> argparse.ArgumentParser:
     def batch_options(s):
         s.add_argument("--scheduler", default="local",
                        help="many cases: local (a Dask LocalCluster, default), none (serial) or a scheduler address")
-        s.add_argument("--workers", type=int, default=None, help="many cases: LocalCluster worker processes")
+        s.add_argument("--workers", type=_count, default=None, help="many cases: LocalCluster worker processes")
 
     s = sub.add_parser("correct", help="correct every ping of a case (or of many: files, a folder or a glob)")
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
@@ -533,8 +626,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     def calibration_options(s):
         s.add_argument("--formulation", default="exact", help="paper | exact | minimal | free")
-        s.add_argument("--starts", type=int, default=24, help="multistart size")
-        s.add_argument("--seed", type=int, default=0, help="seed of the start design")
+        s.add_argument("--starts", type=_count, default=24, help="multistart size")
+        s.add_argument("--seed", type=_seed, default=0, help="seed of the start design")
         s.add_argument("--method", default="joint", help="joint | two-stage")
         s.add_argument("--timing", default="auto", help="auto | shallow | deep | exact bottom-track model")
         s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
@@ -546,13 +639,13 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--moving-bed", default="auto", choices=["auto", "off", "constant", "section"],
                        help="bed moving under the bottom track: auto (constant with a moving reference), off (a bed "
                             "verified fixed), constant, or section (a function of the position along the section)")
-        s.add_argument("--bed-knots", type=int, default=3, help="--moving-bed section: values across the section")
+        s.add_argument("--bed-knots", type=_int_at_least(2), default=3, help="--moving-bed section: values across the section")
         s.add_argument("--compass-deviation", default="auto", choices=["auto", "on", "off"],
                        help="head sensor: add B sin(heading) + C cos(heading) to the misalignment (auto: when the "
                             "headings span enough)")
         s.add_argument("--standard-errors", default="hac", choices=["hac", "white"],
                        help="hac (Newey-West sandwich, coloured residuals) or white")
-        s.add_argument("--declination-deg", type=float,
+        s.add_argument("--declination-deg", type=_finite,
                        help="magnetic declination at the site (east positive), when the cases carry no position and date")
 
     s = sub.add_parser("calibrate", help="estimate attitude model, lever arms and installation angles (one or many cases)")
@@ -581,8 +674,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--effects", nargs="+", help="catalog effects to try (default: all)")
     s.add_argument("--attitude", default="auto",
                    help="auto | model (damped-mode motion model) | samples (the sensor's samples, runs no model follows)")
-    s.add_argument("--selftest", type=int, metavar="N", help="blind self-test on N simulated cases")
-    s.add_argument("--seed", type=int, default=0, help="seed of the self-test draws")
+    s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
+    s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
     s.add_argument("--scenario", default="diag_boat", help="scenario the self-test simulates")
     s.set_defaults(func=cmd_diagnose)
 
@@ -595,21 +688,117 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="the main job on the built-in default case")
     s.add_argument("--scenario", nargs="+", default=list(DEFAULT_CASES), help="measurement runs to correct")
     s.add_argument("--calibration-scenario", default="pool_m0", help="calibration run")
-    s.add_argument("--starts", type=int, default=24)
-    s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--starts", type=_count, default=24)
+    s.add_argument("--seed", type=_seed, default=1)
     s.add_argument("--out", default="demo_out")
     s.set_defaults(func=cmd_demo)
     return p
 
 
+class Terminated(BaseException):
+    """SIGTERM as an exception, so that atomic writers remove their temporary files."""
+
+
+def _terminate(signum, frame):
+    raise Terminated(f"terminated by signal {signum}")
+
+
+@contextlib.contextmanager
+def _sigterm_as_exception():
+    """Turn SIGTERM into :class:`Terminated` while a command runs (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
+
+
+class _HeldStderr:
+    """File descriptor 2 held in a temporary file while a command runs.
+
+    Solver libraries (CasADi, IPOPT, LAPACK) write their own warnings straight to the
+    descriptor. A command that succeeds gets them back afterwards, in order; one that
+    ends in a one-line error drops them, so that the error is the only line.
+    """
+
+    def __init__(self):
+        self._saved = self._sink = None
+
+    def __enter__(self):
+        with contextlib.suppress(Exception):
+            sys.stderr.flush()
+        try:
+            self._saved = os.dup(2)
+            self._sink = tempfile.TemporaryFile()
+            os.dup2(self._sink.fileno(), 2)
+        except OSError:
+            self._saved = self._sink = None
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            with contextlib.suppress(Exception):
+                sys.stderr.flush()
+            os.dup2(self._saved, 2)
+            os.close(self._saved)
+        return False
+
+    def replay(self) -> None:
+        if self._sink is not None:
+            self._sink.seek(0)
+            data = self._sink.read()
+            if data:
+                with contextlib.suppress(Exception):
+                    sys.stderr.flush()
+                os.write(2, data)
+            self._sink.close()
+
+    def drop(self) -> None:
+        if self._sink is not None:
+            self._sink.close()
+
+
+def _holds_stderr(args) -> bool:
+    """Not for what shows progress on stderr: the self-test, benchmarks, many cases."""
+    from .cases.collect import is_many
+
+    if getattr(args, "selftest", None) or args.command in ("bench", "demo"):
+        return False
+    case = getattr(args, "case", None)
+    return not (isinstance(case, list) and is_many(case))
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    held = _HeldStderr() if _holds_stderr(args) else contextlib.nullcontext()
+    error = None
     try:
-        return args.func(args)
+        with _sigterm_as_exception(), held:
+            code = args.func(args)
     except (ValueError, OSError) as exc:
         # CaseFormatError is a ValueError; every user-facing error is one line.
-        print(f"adcpdyn {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        error, code = f"adcpdyn {args.command}: error: {_one_line(exc)}", 2
+    except Terminated as exc:
+        error, code = f"adcpdyn {args.command}: {exc}; stopped (no partial file left)", 128 + signal.SIGTERM
+    except KeyboardInterrupt:
+        error, code = f"adcpdyn {args.command}: interrupted; stopped (no partial file left)", 128 + signal.SIGINT
+    except BaseException:
+        if isinstance(held, _HeldStderr):
+            held.replay()
+        raise
+    if isinstance(held, _HeldStderr):
+        held.drop() if error else held.replay()
+    if error:
+        print(error, file=sys.stderr)
+    return code
 
 
 if __name__ == "__main__":

@@ -9,7 +9,15 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .cases.atomic import atomic_path  # noqa: E402
 from .models.motion import evaluate_attitude  # noqa: E402
+
+
+def _save(fig, path) -> None:
+    """Save a figure atomically (never a half-written PNG) and close it."""
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
 
 
 def attitude_fit_figure(case, attitude, path) -> None:
@@ -27,8 +35,7 @@ def attitude_fit_figure(case, attitude, path) -> None:
     ax[-1].set_xlabel("time (s)")
     fig.suptitle(f"{case.name}: attitude samples and the fitted damped-mode model")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def radius_vectors_figure(lever_arms, lever_se, truth, frame_label, path) -> None:
@@ -57,8 +64,7 @@ def radius_vectors_figure(lever_arms, lever_se, truth, frame_label, path) -> Non
     ax2.legend(fontsize=7)
     fig.suptitle(f"radius vectors, {frame_label} frame, with 1-sigma bars")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def velocity_figure(time_s, velocities: dict, truth, title, path) -> None:
@@ -76,5 +82,4 @@ def velocity_figure(time_s, velocities: dict, truth, title, path) -> None:
     ax[0].legend()
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path)

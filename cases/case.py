@@ -58,9 +58,10 @@ class Environment:
     water_depth_per_ping_m: np.ndarray | None = None  # (N,), overrides the attribute
 
     def depth_at_pings(self, n_pings: int) -> np.ndarray:
-        """Bottom depth below the surface at each ping, (N,)."""
+        """Bottom depth below the surface at each ping, (N,); the attribute where the per-ping value is NaN (missing)."""
         if self.water_depth_per_ping_m is not None:
-            return np.asarray(self.water_depth_per_ping_m, dtype=float)
+            d = np.asarray(self.water_depth_per_ping_m, dtype=float)
+            return np.where(np.isnan(d), float(self.water_depth_m), d)
         return np.full(n_pings, float(self.water_depth_m))
 
 
@@ -108,11 +109,15 @@ class Attitude:
     frame: str = "vessel"
 
     def ypr(self) -> np.ndarray:
-        """(M, 3) yaw, pitch, roll with the heading unwrapped over its valid samples (NaN stays NaN)."""
+        """(M, 3) yaw, pitch, roll with the heading unwrapped (over its finite samples; NaN stays NaN)."""
         heading = np.array(self.heading_rad, dtype=float)
         ok = np.isfinite(heading)
         heading[ok] = np.unwrap(heading[ok])
         return np.column_stack([heading, self.pitch_rad, self.roll_rad])
+
+    def complete(self) -> np.ndarray:
+        """(M,) True where heading, pitch and roll are all finite (NaN: a missing sample)."""
+        return np.isfinite(self.heading_rad) & np.isfinite(self.pitch_rad) & np.isfinite(self.roll_rad)
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,8 @@ def dominant_period_s(t, x, f_min_hz=0.02, f_max_hz=3.0) -> float:
     """
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(x)
+    t, x = t[ok], x[ok]
     if t.size < 8 or np.ptp(x) == 0:
         return float("nan")
     x = x - np.polyval(np.polyfit(t - t[0], x, 1), t - t[0])
@@ -46,22 +48,26 @@ def summarise(case: Case) -> str:
         + ("; slant ranges" if p.bt_range_m is not None else ""),
     ]
     ypr = a.ypr()
-    amp = lambda x: 0.5 * (np.percentile(x, 99) - np.percentile(x, 1))
-    lines.append(f"attitude     {a.time_s.size} samples ({a.frame} frame), {_intervals(a.time_s)}")
+    amp = lambda x: 0.5 * (np.nanpercentile(x, 99) - np.nanpercentile(x, 1))
+    missing = int((~a.complete()).sum())
+    lines.append(f"attitude     {a.time_s.size} samples ({a.frame} frame), {_intervals(a.time_s)}"
+                 + (f"; {missing} with a NaN angle" if missing else ""))
     for label, x in (("roll", ypr[:, 2]), ("pitch", ypr[:, 1])):
         lines.append(
-            f"  {label:<6}     amplitude {np.rad2deg(amp(x)):.2f} deg, mean {np.rad2deg(np.mean(x)):.2f} deg, "
+            f"  {label:<6}     amplitude {np.rad2deg(amp(x)):.2f} deg, mean {np.rad2deg(np.nanmean(x)):.2f} deg, "
             f"dominant period {dominant_period_s(a.time_s, x):.2f} s"
         )
-    lines.append(f"  heading    {np.rad2deg(ypr[0, 0]) % 360:.1f} -> {np.rad2deg(ypr[-1, 0]) % 360:.1f} deg, "
-                 f"span {np.rad2deg(np.ptp(ypr[:, 0])):.1f} deg")
+    heading = ypr[np.isfinite(ypr[:, 0]), 0]
+    lines.append(f"  heading    {np.rad2deg(heading[0]) % 360:.1f} -> {np.rad2deg(heading[-1]) % 360:.1f} deg, "
+                 f"span {np.rad2deg(np.ptp(heading)):.1f} deg")
     if case.water is not None:
         d = case.water.cell_depth_m
         lines.append(f"water        {d.size} cells, {d[0]:.2f}-{d[-1]:.2f} m deep")
     if case.reference is not None:
         r = case.reference
         if r.velocity_m_s is not None and r.time_s is not None:
-            speed = np.nanmean(np.hypot(r.velocity_m_s[:, 0], r.velocity_m_s[:, 1]))
+            speeds = np.hypot(r.velocity_m_s[:, 0], r.velocity_m_s[:, 1])
+            speed = np.nanmean(speeds) if np.isfinite(speeds).any() else float("nan")
             lines.append(f"reference    {r.time_s.size} samples, {_intervals(r.time_s)}, mean speed {speed:.3f} m/s, "
                          f"point {np.round(r.point_body_m, 3).tolist()} m")
         else:

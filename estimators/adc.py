@@ -25,7 +25,6 @@ velocity.
 from __future__ import annotations
 
 import dataclasses
-import json
 
 import numpy as np
 
@@ -178,18 +177,11 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
 
 def lever_arms_from_calibration(calibration: dict, case: Case) -> tuple[np.ndarray, np.ndarray]:
     """(lever arms in the case's sensor frame, installation angles for beams) from CALIB.json contents."""
-    def arr(key):
-        value = calibration.get(key)
-        if value is None:
-            raise ValueError(f"calibration: {key}: missing; expected the output of `adcpdyn calibrate`")
-        a = np.array(value, dtype=float)
-        if np.any(~np.isfinite(a)):
-            raise ValueError(f"calibration: {key}: contains undetermined (null) values; this calibration cannot correct")
-        return a
+    from .calibration_file import installation_angles, lever_arms
 
     if case.attitude.frame == "transducer":
-        return arr("radius_vectors_head_m"), np.zeros(3)
-    return arr("radius_vectors_m"), arr("installation_ypr_rad")
+        return lever_arms(calibration, "transducer"), np.zeros(3)
+    return lever_arms(calibration, "vessel"), installation_angles(calibration)
 
 
 def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
@@ -201,7 +193,9 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
     when the calibration found one (:func:`~adcpdyn.models.sensors.compass_correction`). Other
     cases are returned unchanged.
     """
-    delta = None if calibration is None else calibration.get("heading_misalignment_rad")
+    from .calibration_file import heading_misalignment
+
+    delta = heading_misalignment(calibration)
     if delta is None or case.attitude.frame != "transducer":
         return case
     deviation = calibration.get("compass_deviation_rad") or {}
@@ -244,11 +238,17 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     if method == "oracle":
         if case.truth is None or "attitude_model" not in case.truth.extra_attrs:
             raise ValueError(f"{case.name}: /truth: the oracle needs a case simulated by adcpdyn (true attitude model)")
-        attitude = AttitudeParams.from_dict(json.loads(case.truth.extra_attrs["attitude_model"]))
+        from .calibration_file import attitude_model_from
+
+        attitude = attitude_model_from(case.truth.extra_attrs["attitude_model"],
+                                       f'{case.name}: /truth.attrs["attitude_model"]')
         lever, ypr_st = case.truth.radius_vectors_m, case.truth.installation_ypr_rad  # vessel frame
     else:
         if calibration is None:
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
+        from .calibration_file import as_calibration
+
+        calibration = as_calibration(calibration)
         case = with_heading_misalignment(case, calibration)
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
         if attitude is None and calibration.get("attitude_source") == "samples":  # as the calibration's beams

@@ -13,19 +13,16 @@ CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
 
 def installation_from(calibration: dict) -> np.ndarray:
     """Installation angles of a CALIB.json, or a one-line error naming the field."""
-    value = calibration.get("installation_ypr_rad")
-    if value is None or any(v is None for v in value):
-        raise ValueError("calibration: installation_ypr_rad: missing or not determined; expected 3 angles in radians")
-    return np.asarray(value, dtype=float)
+    from .calibration_file import installation_angles
+
+    return installation_angles(calibration)
 
 
 def assumed_installation(calibration: dict) -> np.ndarray:
     """The nominal installation angles of the calibration's configuration (the mounting as set up)."""
-    value = (calibration.get("config") or {}).get("nominal_installation_ypr_rad")
-    if value is None or len(value) != 3 or any(v is None for v in value):
-        raise ValueError("calibration: installation_ypr_rad is not determined and config.nominal_installation_ypr_rad "
-                         "is missing; expected 3 angles in radians")
-    return np.asarray(value, dtype=float)
+    from .calibration_file import nominal_installation
+
+    return nominal_installation(calibration)
 
 
 def moving_bed_for(calibration: dict | None, case: Case) -> tuple[np.ndarray | None, str]:
@@ -90,8 +87,12 @@ def _correct(case: Case, method: str, calibration: dict | None, timing: str):
     from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
+    from .calibration_file import as_calibration
+
     if method not in CORRECTION_METHODS:
         raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
+    if calibration is not None:
+        calibration = as_calibration(calibration)
     if method == "asc":
         ypr, note = None, None
         if calibration is not None and case.attitude.frame == "vessel":
@@ -105,5 +106,9 @@ def _correct(case: Case, method: str, calibration: dict | None, timing: str):
         result = asc(with_heading_misalignment(case, calibration), ypr)
         if note:
             result.attrs["installation_note"] = note
-        return result
-    return dynamic_correction(case, method, calibration, timing=timing)
+    else:
+        result = dynamic_correction(case, method, calibration, timing=timing)
+    if not np.any(result.beams_used >= 3):
+        raise ValueError(f"{case.name}: /pings/bt_radial_m_s: expected pings with at least 3 valid beams (a velocity "
+                         f"needs 3), got none of {case.pings.n}")
+    return result

@@ -18,14 +18,24 @@ def _trapezoid_displacement(t, v):
 
 def velocity_metrics(time_s, estimate_m_s, reference_m_s) -> dict[str, float]:
     """Mean, SD, RSD, MAE, MRE, error SD, error RSD of the horizontal speed; displacement
-    magnitude, distance error and RE; RMS vector error and RMS direction error (deg)."""
+    magnitude, distance error and RE; RMS vector error and RMS direction error (deg).
+
+    A reference component that is NaN throughout (a reference with no vertical, as video
+    trackers and some GNSS give) is left out of the vector error; otherwise pings where a
+    component is NaN are left out. Without any ping to compare, every metric is NaN.
+    """
     t = np.asarray(time_s, dtype=float)
     est = np.asarray(estimate_m_s, dtype=float)
     ref = np.asarray(reference_m_s, dtype=float)
     if est.shape != ref.shape or est.ndim != 2 or est.shape[1] != 3:
         raise ValueError(f"estimate_m_s/reference_m_s: expected equal shapes (N, 3), got {est.shape} and {ref.shape}")
+    axes = np.isfinite(ref).any(axis=0)
+    axes[:2] = True
+    est, ref = est[:, axes], ref[:, axes]
     ok = np.all(np.isfinite(est), axis=1) & np.all(np.isfinite(ref), axis=1)
     t, est, ref = t[ok], est[ok], ref[ok]
+    if t.size == 0:
+        return {"n_pings": 0, **{k: float("nan") for k in METRIC_LABELS}}
     s_est = np.hypot(est[:, 0], est[:, 1])
     s_ref = np.hypot(ref[:, 0], ref[:, 1])
     err = s_est - s_ref

@@ -30,3 +30,35 @@ def pool_m0():
 @pytest.fixture(scope="session")
 def pool_still():
     return get_scenario("pool_still")
+
+
+def shortened(case, seconds):
+    """The first ``seconds`` of a case: pings, attitude, reference and truth rows cut alike."""
+    import numpy as np
+
+    p, a = case.pings, case.attitude
+    k = p.time_s <= p.time_s[0] + seconds
+    m = a.time_s <= p.time_s[0] + seconds
+    changes = {
+        "pings": dataclasses.replace(p, time_s=p.time_s[k], bt_radial_m_s=p.bt_radial_m_s[k],
+                                     bt_range_m=None if p.bt_range_m is None else p.bt_range_m[k]),
+        "attitude": dataclasses.replace(a, time_s=a.time_s[m], heading_rad=a.heading_rad[m], pitch_rad=a.pitch_rad[m],
+                                        roll_rad=a.roll_rad[m]),
+    }
+    env = case.environment
+    if env.water_depth_per_ping_m is not None:
+        changes["environment"] = dataclasses.replace(env, water_depth_per_ping_m=env.water_depth_per_ping_m[k])
+    if case.water is not None:
+        changes["water"] = dataclasses.replace(case.water, radial_m_s=case.water.radial_m_s[k])
+    r = case.reference
+    if r is not None and r.time_s is not None:
+        j = r.time_s <= p.time_s[0] + seconds
+        changes["reference"] = dataclasses.replace(r, time_s=r.time_s[j],
+                                                   velocity_m_s=None if r.velocity_m_s is None else r.velocity_m_s[j])
+    if case.truth is not None:
+        t = case.truth
+        changes["truth"] = dataclasses.replace(t, vessel_velocity_m_s=t.vessel_velocity_m_s[k],
+                                               water_velocity_m_s=None if t.water_velocity_m_s is None
+                                               else t.water_velocity_m_s[k])
+    assert np.any(k)
+    return case.replace(**changes)

@@ -218,3 +218,50 @@ def test_real_file_runs_through_diagnose(imported, tmp_path):
     result = diagnose(case, DiagnosisConfig(effects=("surge", "installation_misalignment")))
     assert result.verdict in ("surge", "installation_misalignment", "none")
     assert result.where and np.isfinite(result.gap_before)
+
+
+def _chatty_import(ok: bool):
+    """A stand-in TRDI reader that logs as dolfyn does, warns, and hands LAPACK a NaN."""
+    def fake(path, window):
+        import logging
+        import warnings
+
+        for pos in (0, 512, 1024):
+            logging.warning(f"Ensemble starting at startpos {pos} has a checksum error")
+        warnings.warn("a reader's warning")
+        with pytest.raises(np.linalg.LinAlgError):
+            a = np.ones((5, 2))
+            a[0, 0] = np.nan
+            np.linalg.lstsq(a, np.ones(5), rcond=None)  # LAPACK prints DLASCL lines on fd 1
+        if not ok:
+            raise ImportFailure(f"{path}: could not read the file (KeyError: 377)")
+        from adcpdyn.cases.scenario import get_scenario
+        from adcpdyn.models.simulator import simulate
+
+        return simulate(get_scenario("pool_m0"), seed=1), {"/provenance": {"gnss": "none", "coordinate_system_found": "beam"}}
+    return fake
+
+
+@pytest.mark.parametrize("ok", [True, False])
+def test_reader_chatter_is_kept_out_of_the_terminal(tmp_path, capfd, monkeypatch, ok):
+    import logging
+
+    from adcpdyn.cases.importers import trdi
+    from adcpdyn.cli import main
+
+    monkeypatch.setattr(trdi, "import_trdi", _chatty_import(ok))
+    src = tmp_path / "damaged.PD0"
+    src.write_bytes(b"\x7f\x7f")
+    handlers = logging.getLogger().handlers[:]
+    code = main(["import", str(src), "--out", str(tmp_path / "x.h5")])
+    out, err = capfd.readouterr()
+    assert logging.getLogger().handlers == handlers  # the logging set-up is given back
+    assert "DLASCL" not in out + err and "startpos 512" not in out + err and "a reader's warning" not in out + err
+    if ok:
+        assert code == 0 and err == ""
+        notes = [line for line in out.splitlines() if line.startswith("note:")]
+        assert len(notes) == 1 and "kept out of the terminal" in notes[0] and "startpos 0" in notes[0]
+    else:
+        assert code == 2 and err.count("\n") == 1
+        assert "KeyError: 377" in err and "the reader reported: Ensemble starting at startpos 0" in err
+        assert not (tmp_path / "x.h5").exists()

@@ -53,12 +53,17 @@ def import_file(path, window: Window | None = None):
         A one-line message naming what the file lacks or why it cannot be read.
     """
     from .nortek import import_nortek
+    from .reader import quiet_reader
     from .trdi import import_trdi
 
     path = Path(path)
     window = window or Window()
     vendor = detect_vendor(path)
-    return (import_trdi if vendor == "trdi" else import_nortek)(path, window)
+    with quiet_reader() as chatter:
+        case, attrs = (import_trdi if vendor == "trdi" else import_nortek)(path, window)
+    if chatter.messages:
+        attrs.setdefault("/provenance", {})["reader_messages"] = chatter.summary()
+    return case, attrs
 
 
 def _attr_value(v):

@@ -8,6 +8,11 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
+import os
+import sys
+import tempfile
+import threading
 import warnings
 
 # WinRiver II stores GGA latitude and longitude as float64; dolfyn keeps them as float32
@@ -17,6 +22,98 @@ FLOAT64_FIELDS = ("latitude_gps", "longitude_gps")
 
 class ImportFailure(ValueError):
     """A file cannot be imported; the message is one line naming what is missing."""
+
+
+class Chatter:
+    """What a reader said while it ran: log records, warnings and C-level output (one entry per line)."""
+
+    def __init__(self):
+        self.messages: list[str] = []
+
+    def summary(self) -> str | None:
+        """One line: how many messages were kept out of the terminal, and the first (None if none)."""
+        if not self.messages:
+            return None
+        first = self.messages[0] if len(self.messages[0]) <= 100 else self.messages[0][:97] + "..."
+        return (f"{len(self.messages)} message(s) of the file reader (dolfyn log, warnings, LAPACK) kept out of the "
+                f"terminal; first: {first}")
+
+
+class _Collect(logging.Handler):
+    def __init__(self, chatter: Chatter):
+        super().__init__(logging.DEBUG)
+        self.chatter = chatter
+
+    def emit(self, record):
+        with contextlib.suppress(Exception):
+            self.chatter.messages.append(" ".join(record.getMessage().split()))
+
+
+@contextlib.contextmanager
+def _fd_capture(chatter: Chatter):
+    """Route file descriptors 1 and 2 into a temporary file (C libraries write there directly)."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    try:
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no terminal descriptors: nothing to keep out
+        yield
+        return
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            yield
+        finally:
+            for stream in (sys.stdout, sys.stderr):
+                with contextlib.suppress(Exception):
+                    stream.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            sink.seek(0)
+            text = sink.read().decode("utf-8", "replace")
+            chatter.messages.extend(" ".join(line.split()) for line in text.splitlines() if line.strip())
+
+
+@contextlib.contextmanager
+def quiet_reader():
+    """Keep the reader's chatter out of the terminal, and count it.
+
+    dolfyn and MHKiT log to the root logger (checksum errors, unknown ID codes) and warn;
+    LAPACK prints ``** On entry to DLASCL ...`` lines on file descriptor 1 when handed NaN.
+    Inside the block all of that goes into the yielded :class:`Chatter` instead (the root
+    logger's handlers are swapped for a collector, warnings are recorded, descriptors 1 and
+    2 go to a temporary file). Exceptions pass through untouched; an ImportFailure gets
+    the reader's first message appended, so that a damaged file's error says where.
+    """
+    chatter = Chatter()
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    collector = _Collect(chatter)
+    root.handlers = [collector]
+    root.setLevel(logging.WARNING)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                if threading.current_thread() is threading.main_thread():
+                    with _fd_capture(chatter):
+                        yield chatter
+                else:
+                    yield chatter
+            finally:
+                chatter.messages.extend(" ".join(str(w.message).split()) for w in caught)
+    except ImportFailure as exc:
+        if chatter.messages:
+            more = f" (+{len(chatter.messages) - 1} more)" if len(chatter.messages) > 1 else ""
+            raise ImportFailure(f"{exc}; the reader reported: {chatter.messages[0][:120]}{more}") from exc.__cause__
+        raise
+    finally:
+        root.handlers = handlers
+        root.setLevel(level)
 
 
 def reader_version() -> str:

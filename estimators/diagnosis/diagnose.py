@@ -43,6 +43,7 @@ from .model import DiagnosisBase, Fit, GapModel, Pins, base_attitude, group_of, 
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
+MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
 
 
@@ -444,7 +445,14 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     """Diagnose the gap between the base model and one case (or several runs of one boat), blind
     to its truth."""
     cases = [cases] if isinstance(cases, Case) else list(cases)
+    if calibration is not None:
+        from ..calibration_file import as_calibration
+
+        calibration = as_calibration(calibration)
     for case in cases:
+        if case.pings.n < MIN_PINGS:
+            raise ValueError(f"{case.name}: /pings/time_s: expected at least {MIN_PINGS} pings for the gap diagnosis "
+                             f"(residuals held out in time blocks), got {case.pings.n}")
         ypr = case.attitude.ypr()
         if ypr.shape[0] < 3 or np.all(np.nan_to_num(np.ptp(ypr, axis=0)) == 0):
             raise ValueError(f"{case.name}: /attitude: heading, pitch and roll never change (no attitude recorded?); "
