@@ -157,7 +157,9 @@ def test_a_calibration_on_the_samples_corrects_with_the_samples():
     """On noise-free 0.2-s attitude the dynamic correction with the samples' interpolation comes
     within the interpolation error of the truth (the motion model: exact), and the exact per-ping
     solve on the same samples agrees with the closed form on them."""
-    from adcpdyn.models.motion import SampledAttitude, evaluate_attitude
+    import json
+
+    from adcpdyn.models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 
     sc = get_scenario("deep_ship")
     case = simulate(noise_free(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0))), seed=3)
@@ -172,8 +174,13 @@ def test_a_calibration_on_the_samples_corrects_with_the_samples():
     assert rms(model.vessel_velocity_m_s) < 1e-4 and rms(sampled.vessel_velocity_m_s) < 0.2 * rms(static)
     a = case.attitude
     mid = 0.5 * (a.time_s[1:] + a.time_s[:-1])
-    ypr = evaluate_attitude(SampledAttitude(a.time_s, a.ypr()), mid)["ypr"]
-    assert np.allclose(ypr[:, 1], np.interp(mid, a.time_s, a.pitch_rad), atol=1e-12)
+    linear = evaluate_attitude(SampledAttitude(a.time_s, a.ypr(), "linear"), mid)["ypr"]
+    assert np.allclose(linear[:, 1], np.interp(mid, a.time_s, a.pitch_rad), atol=1e-12)
+    # the default smoothing spline lies nearer the true attitude between the samples than the segments do
+    true = evaluate_attitude(AttitudeParams.from_dict(json.loads(t.extra_attrs["attitude_model"])), mid)["ypr"]
+    spline = evaluate_attitude(SampledAttitude(a.time_s, a.ypr()), mid)["ypr"]
+    for j in (1, 2):
+        assert np.sqrt(np.mean((spline[:, j] - true[:, j]) ** 2)) < 0.5 * np.sqrt(np.mean((linear[:, j] - true[:, j]) ** 2))
     exact = dynamic_correction(case, "rootfinder", {**calib, "attitude_source": "samples"})
     assert exact.attrs["rootfinder_unconverged_pings"] == 0
     assert np.nanmax(np.abs(exact.vessel_velocity_m_s - sampled.vessel_velocity_m_s)) < 1e-4
