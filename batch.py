@@ -39,6 +39,7 @@ class CorrectJob:
     method: str
     calibration_path: str | None = None
     timing: str = "deep"
+    reference: str = "bt"  # water velocities referenced to the bottom track or the GNSS
 
 
 def _calibrate(job: CalibrateJob) -> dict:
@@ -69,7 +70,7 @@ def _correct(job: CorrectJob) -> dict:
         with open(job.calibration_path) as fh:
             calibration = json.load(fh)
     case = as_calibrated_run(read_case(job.case_path), job.case_path, calibration)
-    result = correct_case(case, job.method, calibration, job.timing)
+    result = correct_case(case, job.method, calibration, job.timing, job.reference)
     write_correction(result, job.out_path, source_case=job.case_path)
     v = result.vessel_velocity_m_s
     return {"success": True, "method": result.method, "pings": len(v),

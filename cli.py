@@ -160,7 +160,6 @@ def _run_batch(args, jobs, columns) -> int:
 def cmd_correct(args) -> int:
     from .cases.atomic import refuse_overwrite_input
     from .cases.collect import collect_case_paths, is_many
-    from .cases.corrected import write_correction
 
     if is_many(args.case):
         from .batch import CorrectJob, check_scheduler
@@ -170,24 +169,39 @@ def cmd_correct(args) -> int:
             raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {args.method!r}")
         paths, out = collect_case_paths(args.case), _batch_out(args)
         calib = str(Path(args.calibration).resolve()) if args.calibration else None
-        jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing)
-                for p in paths]
+        jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing,
+                           args.reference) for p in paths]
         return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
     refuse_overwrite_input(args.out, args.case, args.calibration)
     calibration = _load_calibration(args.calibration)
     case = as_calibrated_run(_read(args.case), args.case, calibration)
-    result = _correct(case, args.method, calibration, args.timing)
-    write_correction(result, args.out, source_case=str(args.case))
+    result = _correct(case, args.method, calibration, args.timing, args.reference)
+    _write_corrected(result, case, args)
     v = result.vessel_velocity_m_s
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
           f"mean horizontal speed {np.nanmean(np.hypot(v[:, 0], v[:, 1])):.4f} m/s, "
           f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
+    if result.water_velocity_m_s is not None:
+        w = result.water_velocity_m_s
+        print(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
+              f"referenced to {'the bottom track' if result.attrs.get('water_reference') == 'bt' else 'the GNSS'}")
     for key in ("installation_note", "moving_bed_note"):
         if result.attrs.get(key):
             print(f"{'note' if key == 'moving_bed_note' else 'warning'}: {result.attrs[key]}")
     return 0
+
+
+def _write_corrected(result, case, args) -> None:
+    """``--out``: the corrected HDF5 file."""
+    from .cases.corrected import write_correction
+
+    if args.calibration:
+        from .cases.hashing import sha256_of
+
+        result.attrs.update(calibration_file=str(args.calibration), calibration_sha256=sha256_of(args.calibration))
+    write_correction(result, args.out, source_case=str(args.case))
 
 
 def cmd_compare(args) -> int:
@@ -515,6 +529,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--timing", default="deep",
                    help="deep (Eqs. 66-70) | shallow | exact (rootfinder, oracle: travel time with the moving transducer)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
+    s.add_argument("--reference", default="bt",
+                   help="water velocities referenced to the bottom track (bt, default) or to the GNSS velocity (gnss)")
     s.add_argument("--out", required=True, help="output file; with many cases, a folder")
     s.set_defaults(func=cmd_correct)
 
