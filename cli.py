@@ -1,4 +1,4 @@
-"""Command line: ``adcpdyn simulate | import | info | correct | calibrate | compare | scenarios | demo``."""
+"""Command line: ``adcpdyn simulate | import | info | correct | export | calibrate | compare | scenarios | demo``."""
 
 from __future__ import annotations
 
@@ -194,14 +194,37 @@ def cmd_correct(args) -> int:
 
 
 def _write_corrected(result, case, args) -> None:
-    """``--out``: the corrected HDF5 file."""
+    """``--out``: the corrected HDF5 file, or CF netCDF (case and correction) when it ends in ``.nc``."""
     from .cases.corrected import write_correction
 
     if args.calibration:
         from .cases.hashing import sha256_of
 
         result.attrs.update(calibration_file=str(args.calibration), calibration_sha256=sha256_of(args.calibration))
-    write_correction(result, args.out, source_case=str(args.case))
+    if Path(args.out).suffix.lower() != ".nc":
+        write_correction(result, args.out, source_case=str(args.case))
+        return
+    from .cases.netcdf import read_provenance, to_xarray, write_netcdf
+
+    command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
+               + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
+    ds = to_xarray(case, result, provenance=read_provenance(args.case), source_case_path=args.case, history=command)
+    write_netcdf(ds, args.out, args.case, args.calibration)
+
+
+def cmd_export(args) -> int:
+    """A case, or a corrected file with its case, as CF-1.8 netCDF (xarray, h5netcdf)."""
+    from .cases.netcdf import export_file
+
+    if Path(args.out).suffix.lower() != ".nc":
+        raise ValueError(f"--out: expected a netCDF file name ending in .nc, got {args.out!r}")
+    ds = export_file(args.input, args.out, case_path=args.case, history="adcpdyn export " + " ".join(
+        [args.input, "--out", args.out] + (["--case", args.case] if args.case else [])))
+    what = f"method {ds.attrs['processing_method']}, " if "processing_method" in ds.attrs else ""
+    water = f"{ds.sizes['depth']} cells, " if "depth" in ds.sizes else "no water profile, "
+    print(f"wrote {args.out}: {what}{ds.sizes['time']} pings, {water}time "
+          f"{'UTC' if ds['time'].dtype.kind == 'M' else 'in case-clock seconds (no UTC origin)'}, CF-1.8 (h5netcdf)")
+    return 0
 
 
 def cmd_compare(args) -> int:
@@ -531,8 +554,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
     s.add_argument("--reference", default="bt",
                    help="water velocities referenced to the bottom track (bt, default) or to the GNSS velocity (gnss)")
-    s.add_argument("--out", required=True, help="output file; with many cases, a folder")
+    s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
     s.set_defaults(func=cmd_correct)
+
+    s = sub.add_parser("export", help="a case or a corrected file as CF-1.8 netCDF (ENU, UTC time, xarray-ready)")
+    s.add_argument("input", help="CASE.h5 or the output of `adcpdyn correct` (OUT.h5)")
+    s.add_argument("--case", help="a corrected file's case (default: the case it names)")
+    s.add_argument("--out", required=True, help="OUT.nc")
+    s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("compare", help="every correction method on one case: metrics table and figures")
     s.add_argument("case")
