@@ -261,6 +261,10 @@ def _global_attributes(case, provenance, source_case_path, origin_note, beam_not
         "radial_velocity_sign": "positive away from the transducer (CF); the instrument's and case's convention is "
                                 "positive toward it",
         "featureType_note": "profiles from a moving platform; not written as a CF discrete-sampling geometry",
+        "instrument_beam_angle_deg": float(np.rad2deg(case.instrument.beam_angle_rad)),
+        "instrument_frequency_hz": float(case.instrument.frequency_hz),
+        "instrument_sound_speed_m_s": float(case.instrument.sound_speed_m_s),
+        "attitude_sensor_frame": case.attitude.frame,
     }
     if source_case_path is not None:
         attrs["source_case_file"] = str(source_case_path)
