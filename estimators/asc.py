@@ -103,7 +103,11 @@ def asc(case: Case, installation_ypr_rad=None, water_reference: str = "bt") -> C
             water = vw.reshape(N, K, 3)
         else:
             water = relative + reference_velocity_at(case, case.pings.time_s)[:, None, :]
-        attrs.update(water_reference=water_reference, water_reference_note=REFERENCE_NOTES[water_reference])
+        note = REFERENCE_NOTES[water_reference]
+        if water_reference == "gnss" and np.any(case.reference.point_body_m):
+            note += ("; the static correction takes the reference point's velocity for the transducer's (the lever arm "
+                     "between them is ignored, as is every rotation)")
+        attrs.update(water_reference=water_reference, water_reference_note=note)
     return Correction(
         method="asc",
         time_s=case.pings.time_s.copy(),

@@ -156,3 +156,23 @@ def test_window_selects_the_same_water(imported):
     assert 0 < k <= full.water.cell_depth_m.size
     np.testing.assert_array_equal(part.water.cell_depth_m, full.water.cell_depth_m[:k])
     np.testing.assert_array_equal(part.water.radial_m_s, full.water.radial_m_s[rows][:, :, :k])
+
+
+@pytest.mark.parametrize("name, frame", FILES)
+def test_exported_netcdf_equals_the_instrument_earth_velocities(tmp_path, imported, name, frame):
+    """The same check through ``correct_case`` and the CF export read back with xarray (ENU, beams, time)."""
+    xr = pytest.importorskip("xarray")
+    from adcpdyn.cases.netcdf import to_xarray, write_netcdf
+    from adcpdyn.estimators.correct_case import correct_case
+
+    case, attrs = imported(name)
+    write_netcdf(to_xarray(case, correct_case(case, "asc", None), provenance=attrs["/provenance"]), tmp_path / "w.nc")
+    theirs, bt = _dolfyn(name, case)
+    with xr.open_dataset(tmp_path / "w.nc", engine="h5netcdf") as ds:
+        rel = np.stack([ds[f"water_relative_velocity_{c}"].values for c in ("east", "north", "up")], axis=-1)
+        ref = np.stack([ds[f"water_velocity_{c}"].values for c in ("east", "north", "up")], axis=-1)
+        assert ds["water_velocity_east"].dims == ("time", "depth") and ds.sizes["time"] == case.pings.n
+    n_theirs = int(np.isfinite(theirs).all(-1).sum())
+    d_rel, _ = _max_diff(rel, theirs, min_count=0.6 * n_theirs)
+    d_ref, _ = _max_diff(ref, theirs - bt[:, None, :], min_count=0.3 * n_theirs)
+    assert d_rel < EARTH_WATER_TOL and d_ref < EARTH_WATER_TOL, (name, d_rel, d_ref)
