@@ -300,8 +300,10 @@ def _correction_variables(case, correction, data: dict, attrs: dict) -> None:
     north_ref = ("true north (heading misalignment applied)" if s.get("heading_misalignment_applied_rad") is not None
                  else "the compass's north (no heading correction applied)")
     east, north, up = _enu(correction.vessel_velocity_m_s)
-    over = "over ground" if s.get("moving_bed_velocity_m_s") is not None else "over the bed"
-    vc = {"units": "m s-1", "comment": f"method {method}; north: {north_ref}"}
+    bed = s.get("moving_bed_velocity_m_s") is not None
+    over = "over ground" if bed else "over the bed (taken as fixed)"
+    point = "the transducer (static correction: rotation ignored)" if method == "asc" else "the centre of rotation G"
+    vc = {"units": "m s-1", "comment": f"method {method}, velocity of {point}; north: {north_ref}"}
     for name, values, word in (("vessel_velocity_east", east, "eastward"), ("vessel_velocity_north", north, "northward"),
                                ("vessel_velocity_up", up, "upward")):
         data[name] = (("time",), values, {**vc, "long_name": f"{word} velocity of the vessel {over} from bottom track"})
@@ -324,8 +326,10 @@ def _correction_variables(case, correction, data: dict, attrs: dict) -> None:
                                          ("upward_sea_water_velocity", "up"))):
             data[f"water_velocity_{word}"] = (("time", "depth"), _enu(correction.water_velocity_m_s)[j], {
                 **wc, "standard_name": std,
-                "long_name": f"{std.split('_')[0]} water velocity over ground (referenced to "
-                             f"{'bottom track' if reference == 'bt' else 'GNSS'})"})
+                "long_name": f"{std.split('_')[0]} water velocity "
+                             + ("over ground (referenced to the GNSS)" if reference == "gnss" else
+                                "over ground (referenced to the bottom track and the moving bed)" if bed else
+                                "relative to the bed (referenced to the bottom track, the bed taken as fixed)")})
         rel = getattr(correction, "water_relative_velocity_m_s", None)
         if rel is not None:
             whom = "the transducer" if method == "asc" else "the vessel's centre of rotation"
