@@ -39,6 +39,7 @@ class CorrectJob:
     method: str
     calibration_path: str | None = None
     timing: str = "deep"
+    reference: str = "bt"  # water velocities referenced to the bottom track or the GNSS
 
 
 def _read_covered(path: str):
@@ -78,7 +79,7 @@ def _correct(job: CorrectJob) -> dict:
     calibration = None if job.calibration_path is None else read_calibration(job.calibration_path)
     case, notes = _read_covered(job.case_path)
     case = as_calibrated_run(case, job.case_path, calibration)
-    result = correct_case(case, job.method, calibration, job.timing)
+    result = correct_case(case, job.method, calibration, job.timing, job.reference)
     if notes:
         result.attrs["warnings"] = notes
     write_correction(result, job.out_path, source_case=job.case_path)

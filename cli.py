@@ -1,4 +1,4 @@
-"""Command line: ``adcpdyn simulate | import | info | correct | calibrate | compare | scenarios | demo``."""
+"""Command line: ``adcpdyn simulate | import | info | correct | export | calibrate | compare | scenarios | demo``."""
 
 from __future__ import annotations
 
@@ -201,7 +201,6 @@ def _run_batch(args, jobs, columns) -> int:
 def cmd_correct(args) -> int:
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
-    from .cases.corrected import write_correction
 
     if args.timing not in TIMINGS:
         raise ValueError(f"--timing: expected one of {list(TIMINGS)}, got {args.timing!r}")
@@ -214,8 +213,8 @@ def cmd_correct(args) -> int:
         paths, out = collect_case_paths(args.case), _batch_out(args)
         _load_calibration(args.calibration)  # a bad file is one error here, not one per case
         calib = str(Path(args.calibration).resolve()) if args.calibration else None
-        jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing)
-                for p in paths]
+        jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing,
+                           args.reference) for p in paths]
         return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
@@ -223,18 +222,58 @@ def cmd_correct(args) -> int:
     calibration = _load_calibration(args.calibration)
     case, notes = _prepare(args.case)
     case = as_calibrated_run(case, args.case, calibration)
-    result = _correct(case, args.method, calibration, args.timing)
+    result = _correct(case, args.method, calibration, args.timing, args.reference)
     if notes:
         result.attrs["warnings"] = notes
-    write_correction(result, args.out, source_case=str(args.case))
+    _write_corrected(result, case, args)
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
           f"mean horizontal speed {np.nanmean(speed) if np.isfinite(speed).any() else float('nan'):.4f} m/s, "
           f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
+    if result.water_velocity_m_s is not None:
+        w = result.water_velocity_m_s
+        print(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
+              f"referenced to {'the bottom track' if result.attrs.get('water_reference') == 'bt' else 'the GNSS'}")
     for key in ("installation_note", "moving_bed_note"):
         if result.attrs.get(key):
             print(f"{'note' if key == 'moving_bed_note' else 'warning'}: {result.attrs[key]}")
+    return 0
+
+
+def _write_corrected(result, case, args) -> None:
+    """``--out``: the corrected HDF5 file, or CF netCDF (case and correction) when it ends in ``.nc``."""
+    from .cases.corrected import write_correction
+
+    if args.calibration:
+        from .cases.hashing import sha256_of
+
+        result.attrs.update(calibration_file=str(args.calibration), calibration_sha256=sha256_of(args.calibration))
+    if Path(args.out).suffix.lower() != ".nc":
+        write_correction(result, args.out, source_case=str(args.case))
+        return
+    from .cases.netcdf import read_provenance, to_xarray, write_netcdf
+
+    command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
+               + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
+    ds = to_xarray(case, result, provenance=read_provenance(args.case), source_case_path=args.case, history=command)
+    write_netcdf(ds, args.out, args.case, args.calibration)
+
+
+def cmd_export(args) -> int:
+    """A case, or a corrected file with its case, as CF-1.8 netCDF (xarray, h5netcdf)."""
+    from .cases.atomic import check_output_file
+    from .cases.netcdf import export_file
+
+    if Path(args.out).suffix.lower() != ".nc":
+        raise ValueError(f"--out: expected a netCDF file name ending in .nc, got {args.out!r}")
+    check_output_file(args.out, args.input, args.case)
+    ds = export_file(args.input, args.out, case_path=args.case, history="adcpdyn export " + " ".join(
+        [args.input, "--out", args.out] + (["--case", args.case] if args.case else [])))
+    what = f"method {ds.attrs['processing_method']}, " if "processing_method" in ds.attrs else ""
+    water = f"{ds.sizes['depth']} cells, " if "depth" in ds.sizes else "no water profile, "
+    print(f"wrote {args.out}: {what}{ds.sizes['time']} pings, {water}time "
+          f"{'UTC' if ds['time'].dtype.kind == 'M' else 'in case-clock seconds (no UTC origin)'}, CF-1.8 (h5netcdf)")
     return 0
 
 
@@ -615,8 +654,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--timing", default="deep",
                    help="deep (Eqs. 66-70) | shallow | exact (rootfinder, oracle: travel time with the moving transducer)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
-    s.add_argument("--out", required=True, help="output file; with many cases, a folder")
+    s.add_argument("--reference", default="bt",
+                   help="water velocities referenced to the bottom track (bt, default) or to the GNSS velocity (gnss)")
+    s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
     s.set_defaults(func=cmd_correct)
+
+    s = sub.add_parser("export", help="a case or a corrected file as CF-1.8 netCDF (ENU, UTC time, xarray-ready)")
+    s.add_argument("input", help="CASE.h5 or the output of `adcpdyn correct` (OUT.h5)")
+    s.add_argument("--case", help="a corrected file's case (default: the case it names)")
+    s.add_argument("--out", required=True, help="OUT.nc")
+    s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("compare", help="every correction method on one case: metrics table and figures")
     s.add_argument("case")

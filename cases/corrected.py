@@ -2,8 +2,9 @@
 
 Layout: ``/corrected/time_s`` (N,), ``vessel_velocity_m_s`` (N, 3),
 ``error_velocity_m_s`` (N,), ``beams_used`` (N,), and with a profile
-``water_velocity_m_s`` (N, K, 3); attributes ``method``, ``source_case`` and the
-method's own settings (JSON).
+``water_velocity_m_s`` (N, K, 3) (referenced: ``settings["water_reference"]``) and
+``water_relative_velocity_m_s`` (N, K, 3) (not referenced); attributes ``method``,
+``source_case`` and the method's own settings (JSON).
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ def write_correction(correction, path, source_case: str = "") -> None:
             g.create_dataset("beams_used", data=np.asarray(correction.beams_used, dtype=np.int8))
             if correction.water_velocity_m_s is not None:
                 g.create_dataset("water_velocity_m_s", data=np.asarray(correction.water_velocity_m_s, dtype=float))
+            if getattr(correction, "water_relative_velocity_m_s", None) is not None:
+                g.create_dataset("water_relative_velocity_m_s",
+                                 data=np.asarray(correction.water_relative_velocity_m_s, dtype=float))
 
 
 def read_correction(path) -> dict:

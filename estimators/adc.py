@@ -208,7 +208,7 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
 
 def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None = None,
                        attitude: AttitudeParams | None = None, timing: str = "deep",
-                       rootfinder_options=None) -> Correction:
+                       rootfinder_options=None, water_reference: str = "bt") -> Correction:
     """Correct every ping of a case (see module docstring).
 
     Parameters
@@ -227,6 +227,11 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
         moving during the flight, :mod:`adcpdyn.models.measurement`).
     rootfinder_options : RootfinderOptions, optional
         Newton steps, threads and compilation of the exact solve (``rootfinder``, ``oracle``).
+    water_reference : str
+        Water cells solved with the corrected bottom-track vessel velocity (``bt``) or with
+        the centre of rotation's velocity from the GNSS (``gnss``:
+        :func:`~adcpdyn.estimators.water.centre_velocity_from_reference`); either way the
+        velocity relative to G (solved with G at rest) is kept too.
     """
     if timing not in ("deep", "shallow", "exact"):
         raise ValueError(f"timing: expected 'deep', 'shallow' or 'exact', got {timing!r}")
@@ -262,9 +267,25 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
         allowed = [False, True, True, True] if method == "paper_literal" else [True] * 4
         V, err, n_good = _solve(geo["A"], geo["b"], case.instrument.beam_directions(), allowed)
         info = {}
-    water = None
+    water, relative = None, None
     if case.water is not None:
-        water = _water(case, attitude, lever, ypr_st, V, tangential, timing)
+        water, relative, info["water_reference"], info["water_reference_note"] = _referenced_water(
+            case, attitude, lever, ypr_st, V, tangential, timing, water_reference, calibration, method == "oracle")
     return Correction(method=method, time_s=case.pings.time_s.copy(), vessel_velocity_m_s=V, error_velocity_m_s=err,
                       beams_used=n_good, water_velocity_m_s=water, attrs={"lever_arms_sensor_m": np.asarray(lever).tolist(),
-                                                "installation_ypr_rad": np.asarray(ypr_st).tolist(), "timing": timing, **info})
+                                                "installation_ypr_rad": np.asarray(ypr_st).tolist(), "timing": timing, **info},
+                      water_relative_velocity_m_s=relative)
+
+
+def _referenced_water(case, attitude, lever, ypr_st, V, tangential, timing, reference, calibration, oracle):
+    """Water cells referenced to the bottom track (``V``) or the GNSS, and relative to G (G at rest)."""
+    from .water import REFERENCE_NOTES, centre_velocity_from_reference, check_reference, reference_point_in_sensor_frame
+
+    check_reference(reference, case)
+    if reference == "gnss":
+        V = centre_velocity_from_reference(case, attitude, reference_point_in_sensor_frame(case, calibration, oracle))
+    water = _water(case, attitude, lever, ypr_st, V, tangential, timing)
+    relative = _water(case, attitude, lever, ypr_st, np.zeros_like(V), tangential, timing)
+    note = REFERENCE_NOTES[reference] + ("; each cell solved with that vessel velocity (Eq. 95), the relative velocity "
+                                         "with the centre of rotation at rest")
+    return water, relative, reference, note

@@ -25,8 +25,10 @@ from ..models.rotations import euler_matrices, euler_matrix
 class Correction:
     """Per-ping velocities from one correction method.
 
-    vessel_velocity_m_s (N, 3) Earth frame; water_velocity_m_s (N, K, 3) or None;
-    error_velocity_m_s (N,) (NaN where fewer than four beams); beams_used (N,) int.
+    vessel_velocity_m_s (N, 3) Earth frame; water_velocity_m_s (N, K, 3) or None, referenced
+    to the bottom track or the GNSS (``attrs["water_reference"]``);
+    water_relative_velocity_m_s (N, K, 3) or None, the water relative to the transducer (not
+    referenced); error_velocity_m_s (N,) (NaN where fewer than four beams); beams_used (N,) int.
     """
 
     method: str
@@ -36,6 +38,7 @@ class Correction:
     beams_used: np.ndarray
     water_velocity_m_s: np.ndarray | None = None
     attrs: dict = field(default_factory=dict)
+    water_relative_velocity_m_s: np.ndarray | None = None
 
 
 def attitude_at(case: Case, times) -> np.ndarray:
@@ -65,7 +68,7 @@ def beams_to_earth(radial: np.ndarray, beam_dirs_t: np.ndarray, R: np.ndarray):
     return np.einsum("nij,nj->ni", R, v_t), err, n_good
 
 
-def asc(case: Case, installation_ypr_rad=None) -> Correction:
+def asc(case: Case, installation_ypr_rad=None, water_reference: str = "bt") -> Correction:
     """The attitude static correction of every ping of a case.
 
     Parameters
@@ -73,6 +76,10 @@ def asc(case: Case, installation_ypr_rad=None) -> Correction:
     case : Case
     installation_ypr_rad : (3,) array, optional
         Installation angles from a calibration; zeros when not given.
+    water_reference : str
+        ``bt`` (water = Earth transform of bt - w per beam: the bottom-track vessel
+        velocity added) or ``gnss`` (water relative to the transducer + the reference
+        velocity interpolated to the pings, :mod:`adcpdyn.estimators.water`).
     """
     ypr_tb = np.zeros(3) if installation_ypr_rad is None else np.asarray(installation_ypr_rad, dtype=float)
     if ypr_tb.shape != (3,):
@@ -81,13 +88,26 @@ def asc(case: Case, installation_ypr_rad=None) -> Correction:
     R = earth_rotation(case, case.pings.time_s, ypr_tb)
     bt = case.pings.bt_radial_m_s
     v, err, n_good = beams_to_earth(bt, B, R)
-    water = None
+    water = relative = None
+    attrs = {"installation_ypr_rad": ypr_tb.tolist()}
     if case.water is not None:
-        rel = bt[:, :, None] - case.water.radial_m_s  # Earth-relative radial water velocity
-        N, _, K = rel.shape
-        flat = rel.transpose(0, 2, 1).reshape(N * K, 4)
-        vw, _, _ = beams_to_earth(flat, B, np.repeat(R, K, axis=0))
-        water = vw.reshape(N, K, 3)
+        from .water import REFERENCE_NOTES, check_reference, reference_velocity_at, static_relative_water
+
+        check_reference(water_reference, case)
+        relative = static_relative_water(case, R)
+        if water_reference == "bt":
+            rel = bt[:, :, None] - case.water.radial_m_s  # Earth-relative radial water velocity
+            N, _, K = rel.shape
+            flat = rel.transpose(0, 2, 1).reshape(N * K, 4)
+            vw, _, _ = beams_to_earth(flat, B, np.repeat(R, K, axis=0))
+            water = vw.reshape(N, K, 3)
+        else:
+            water = relative + reference_velocity_at(case, case.pings.time_s)[:, None, :]
+        note = REFERENCE_NOTES[water_reference]
+        if water_reference == "gnss" and np.any(case.reference.point_body_m):
+            note += ("; the static correction takes the reference point's velocity for the transducer's (the lever arm "
+                     "between them is ignored, as is every rotation)")
+        attrs.update(water_reference=water_reference, water_reference_note=note)
     return Correction(
         method="asc",
         time_s=case.pings.time_s.copy(),
@@ -95,5 +115,6 @@ def asc(case: Case, installation_ypr_rad=None) -> Correction:
         error_velocity_m_s=err,
         beams_used=n_good,
         water_velocity_m_s=water,
-        attrs={"installation_ypr_rad": ypr_tb.tolist()},
+        attrs=attrs,
+        water_relative_velocity_m_s=relative,
     )

@@ -54,9 +54,12 @@ def as_calibrated_run(case: Case, path, calibration: dict | None) -> Case:
 
 def with_moving_bed(result, bed: np.ndarray, source: str):
     """Bottom track measures the vessel over a moving bed: add the bed back to the vessel velocity
-    and to water velocities referenced to it, and say so in the attributes."""
+    and to water velocities referenced to it (not to those referenced to the GNSS, already over
+    ground), and say so in the attributes."""
     offset = np.array([bed[0], bed[1], 0.0])
-    water = None if result.water_velocity_m_s is None else result.water_velocity_m_s + offset
+    water = result.water_velocity_m_s
+    if water is not None and result.attrs.get("water_reference", "bt") == "bt":
+        water = water + offset
     attrs = {**result.attrs, "moving_bed_velocity_m_s": offset[:2].tolist(),
              "moving_bed_note": f"bed velocity from {source} added to the bottom-track vessel velocity "
                                 "(and to the water velocities referenced to it): velocities are over ground"}
@@ -64,14 +67,40 @@ def with_moving_bed(result, bed: np.ndarray, source: str):
                                attrs=attrs)
 
 
-def correct_case(case: Case, method: str, calibration: dict | None, timing: str = "deep"):
+def correct_case(case: Case, method: str, calibration: dict | None, timing: str = "deep", reference: str = "bt"):
     """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
     sensor, its heading misalignment) or a dynamic method of
     :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``; then the moving bed
-    the calibration found under this case added back (:func:`moving_bed_for`)."""
-    result = _correct(case, method, calibration, timing)
+    the calibration found under this case added back (:func:`moving_bed_for`). Water cells are
+    referenced to the bottom track or to the GNSS (``reference``: ``bt`` | ``gnss``,
+    :mod:`adcpdyn.estimators.water`); the heading corrections applied are in the result's attrs."""
+    from .water import check_reference
+
+    check_reference(reference)
+    result = _correct(case, method, calibration, timing, reference)
+    result.attrs.update(heading_corrections_applied(case, calibration if method != "oracle" else None))
     bed, source = moving_bed_for(calibration, case) if method != "oracle" else _true_bed(case)
     return result if bed is None else with_moving_bed(result, bed, source)
+
+
+def heading_corrections_applied(case: Case, calibration: dict | None) -> dict:
+    """What a correction did to the headings, for its attributes: the heading misalignment and compass
+    deviation applied to a head sensor's readings (the misalignment holds the magnetic declination,
+    which is not applied again), with the calibration's declination and compass error for the record."""
+    delta = None if calibration is None else calibration.get("heading_misalignment_rad")
+    if delta is None or case.attitude.frame != "transducer":
+        why = ("no calibration" if calibration is None else
+               "vessel-frame attitude: installation angles instead" if case.attitude.frame != "transducer" else
+               "the calibration has no heading misalignment")
+        return {"heading_misalignment_applied_rad": None, "heading_correction_note": f"headings as recorded ({why})"}
+    return {
+        "heading_misalignment_applied_rad": float(delta),
+        "compass_deviation_applied_rad": calibration.get("compass_deviation_rad"),
+        "magnetic_declination_rad": calibration.get("magnetic_declination_rad"),
+        "compass_error_rad": calibration.get("compass_error_rad"),
+        "heading_correction_note": ("true heading = recorded heading + heading misalignment (+ compass deviation): "
+                                    "the misalignment holds the magnetic declination, not applied separately"),
+    }
 
 
 def _true_bed(case: Case) -> tuple[np.ndarray | None, str]:
@@ -83,7 +112,7 @@ def _true_bed(case: Case) -> tuple[np.ndarray | None, str]:
     return np.array([beds[0]["velocity_north_m_s"], beds[0]["velocity_east_m_s"]]), "/truth (the simulated bed)"
 
 
-def _correct(case: Case, method: str, calibration: dict | None, timing: str):
+def _correct(case: Case, method: str, calibration: dict | None, timing: str, reference: str = "bt"):
     from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
@@ -103,11 +132,11 @@ def _correct(case: Case, method: str, calibration: dict | None, timing: str):
                 note = (f"installation angles not determined by the calibration: its nominal angles "
                         f"{np.round(np.rad2deg(ypr), 3).tolist()} deg are used, as a static correction with the "
                         "configured alignment would; the Earth velocities carry the unknown installation error")
-        result = asc(with_heading_misalignment(case, calibration), ypr)
+        result = asc(with_heading_misalignment(case, calibration), ypr, water_reference=reference)
         if note:
             result.attrs["installation_note"] = note
     else:
-        result = dynamic_correction(case, method, calibration, timing=timing)
+        result = dynamic_correction(case, method, calibration, timing=timing, water_reference=reference)
     if not np.any(result.beams_used >= 3):
         raise ValueError(f"{case.name}: /pings/bt_radial_m_s: expected pings with at least 3 valid beams (a velocity "
                          f"needs 3), got none of {case.pings.n}")

@@ -13,7 +13,8 @@ import datetime as dt
 import numpy as np
 
 from ..case import Attitude, Case, Environment, Instrument, Pings, Position, Reference, format_utc
-from . import gnss, rdi_frames
+from ..hashing import sha256_of
+from . import gnss, rdi_frames, rdi_water
 from .reader import ImportFailure, read_dolfyn
 from .window import Window, select
 
@@ -55,7 +56,8 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     ImportFailure
         One line naming what is missing (no bottom track, unreadable file, ...).
     """
-    ds, version = read_dolfyn(path)
+    with rdi_water.cell_size_history() as cell_sizes:
+        ds, version = read_dolfyn(path)
     a = ds.attrs
     if "vel_bt" not in ds:
         raise ImportFailure(f"{path}: bottom track: none in this file (no TRDI bottom-track block); "
@@ -112,6 +114,8 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     t_rel = t_abs - t_abs[0]
     water_depth = transducer_depth + np.interp(t_rel, t_rel[ok], mean_vert[ok])
     frame = "transducer" if all(internal.values()) else "vessel"
+    water, water_attrs = rdi_water.water_profile(ds, coord, beam_angle, convex, rot, keep, transducer_depth,
+                                                 float(np.max(water_depth)), cell_sizes)
     attitude_missing = bool(np.all(ang["heading"] == 0) and np.all(ang["pitch"] == 0) and np.all(ang["roll"] == 0))
 
     case = Case(
@@ -123,10 +127,11 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
                                 water_depth_per_ping_m=water_depth),
         pings=Pings(time_s=t_rel, bt_radial_m_s=radial, bt_range_m=slant),
         attitude=Attitude(time_s=t_rel.copy(), heading_rad=heading, pitch_rad=pitch, roll_rad=roll, frame=frame),
+        water=water,
     )
     attrs = {
         "/provenance": {
-            "source_file": str(path), "reader": version, "vendor": "TRDI",
+            "source_file": str(path), "source_file_sha256": sha256_of(path), "reader": version, "vendor": "TRDI",
             "instrument": f"{a.get('inst_model', '?')} {a.get('carrier_freq', '?')} kHz, SN {a.get('serialnum', '?')}, "
                           f"firmware {a.get('firmware_ver', '?')}",
             "source_program": str(a.get("source_program") or "unknown"),
@@ -137,7 +142,8 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
             "beam_mapping": "case beams 1,2,3,4 = RDI beams 4,3,2,1 (case x_t = RDI Y toward beam 3, y_t = RDI X, z_t = -Z)",
             "time_origin_adcp_clock": str(np.datetime64(int(round(t_abs[0] * 1e9)), "ns")),
             "pings_read": int(ds["time"].size), "selection": window_note,
-            "water_profile": "not imported (optional group)",
+            "water_profile": water_attrs.pop("water_profile", f"imported: {0 if water is None else water.cell_depth_m.size} "
+                                                               "cells (/water; conversions in its attributes)"),
         },
         "/pings": {
             "bt_velocity_source": f"dolfyn vel_bt in {coord} coordinates, restored to the PD0's integer mm/s, float64",
@@ -160,6 +166,7 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
             "transducer_depth_source": "median of the PD0 depth field (ED); 0 when the instrument was not told",
             "water_depth_source": "transducer depth + mean of the four vertical BT ranges, interpolated where BT was lost",
         },
+        **({"/water": water_attrs} if water is not None else {}),
         "/instrument": {
             "transducer_radius_source": "not in the file: 0 (all four transducers at P)",
             "sound_speed_source": f"median of the PD0 sound speed ({np.nanmin(c_sound):.1f}-{np.nanmax(c_sound):.1f} m/s)",
