@@ -531,6 +531,7 @@ class CalibrationProblem:
                          f"{self.heading_span:.3f}, 0.5 = all round); what the headings leave open enters the bed's and "
                          "the misalignment's standard errors")}
         declination, declination_note = self._declination()
+        self._se_x = se_x
         runs = self._run_results(x, e, bed)
         for msg in warn:
             warnings.warn(msg, stacklevel=3)
@@ -683,6 +684,8 @@ class CalibrationProblem:
             mean = np.angle(np.mean(np.exp(1j * psi)))
             sd = np.sqrt(-2 * np.log(max(abs(np.mean(np.exp(1j * psi))), 1e-12)))
             v_bed, se_bed = bed["runs"][k] if bed["runs"][k] is not None else (None, None)
+            i_depth = u.index(f"depth_offset{k}")
+            depth = (float(x[i_depth[0]]), float(self._se_x[i_depth[0]])) if i_depth.size else (None, None)
             out.append(RunResult(
                 case=run.case.name, n_pings=run.case.pings.n, moving_bed_velocity_m_s=v_bed, moving_bed_velocity_se_m_s=se_bed,
                 noise_sigma={g: self.sigma[(k, g)] for (rk, g) in model.sigma_keys if rk == k},
@@ -690,7 +693,8 @@ class CalibrationProblem:
                 attitude_source="samples" if run.attitude_source == "samples" else "model",
                 attitude_source_reason=run.attitude_reason, timing=run.timing,
                 heading_deg=(float(np.rad2deg(mean) % 360), float(np.rad2deg(sd))),
-                velocity_knots_s=knots, velocity_knots_m_s=vk,
+                velocity_knots_s=knots, velocity_knots_m_s=vk, transducer_depth_offset_m=depth[0],
+                transducer_depth_offset_se_m=depth[1],
                 attitude=run.fit.params if run.attitude_source != "model" else
                 AttitudeParams.unpack(x[u.index(f"attitude{k}")], run.fit.params.layout)))
         return out

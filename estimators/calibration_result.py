@@ -62,6 +62,8 @@ class RunResult:
     timing: str
     heading_deg: tuple  # circular mean and circular standard deviation of the sensor's heading
     attitude: AttitudeParams | None = None  # this run's motion model (the pre-fit when the beams used the samples)
+    transducer_depth_offset_m: float | None = None  # what the slant ranges add to the case's transducer depth
+    transducer_depth_offset_se_m: float | None = None
     velocity_knots_s: np.ndarray | None = None
     velocity_knots_m_s: np.ndarray | None = None
 
@@ -79,6 +81,9 @@ class RunResult:
             "attitude_source_reason": self.attitude_source_reason,
             "timing": self.timing,
             "heading_deg": {"mean": self.heading_deg[0], "circular_sd": self.heading_deg[1]},
+            "transducer_depth_offset_m": (self.transducer_depth_offset_m if self.transducer_depth_offset_se_m is not None
+                                          and np.isfinite(self.transducer_depth_offset_se_m) else None),
+            "transducer_depth_offset_se_m": self.transducer_depth_offset_se_m,
         }
         if self.velocity_knots_s is not None:
             out["velocity_model"] = {"knot_times_s": self.velocity_knots_s, "knot_velocities_m_s": self.velocity_knots_m_s}

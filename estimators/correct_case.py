@@ -41,6 +41,20 @@ def moving_bed_for(calibration: dict | None, case: Case) -> tuple[np.ndarray | N
     return np.asarray(bed, dtype=float), "the calibration's site bed (this case is not one of its runs)"
 
 
+def with_calibrated_depth(case: Case, calibration: dict | None) -> tuple[Case, str]:
+    """The case with the transducer depth its own calibration found from the slant ranges (the
+    case's entry in ``runs``), and a note; unchanged without one."""
+    own = next((r for r in (calibration or {}).get("runs") or [] if r.get("case") == case.name), None)
+    offset = None if own is None else own.get("transducer_depth_offset_m")
+    if offset is None or not np.isfinite(offset) or offset == 0:
+        return case, ""
+    env = case.environment
+    depth = env.transducer_depth_m + float(offset)
+    note = (f"transducer depth {env.transducer_depth_m:.3f} m -> {depth:.3f} m (offset {float(offset):+.3f} m the "
+            "calibration found from the slant ranges)")
+    return case.replace(environment=dataclasses.replace(env, transducer_depth_m=depth)), note
+
+
 def as_calibrated_run(case: Case, path, calibration: dict | None) -> Case:
     """A joint calibration keys its runs by case name, or by file name when the cases shared one:
     the case named so that :func:`moving_bed_for` finds its own run."""
@@ -77,8 +91,11 @@ def correct_case(case: Case, method: str, calibration: dict | None, timing: str 
     from .water import check_reference
 
     check_reference(reference)
+    case, depth_note = with_calibrated_depth(case, calibration) if method != "oracle" else (case, "")
     result = _correct(case, method, calibration, timing, reference)
     result.attrs.update(heading_corrections_applied(case, calibration if method != "oracle" else None))
+    if depth_note:
+        result.attrs["transducer_depth_note"] = depth_note
     bed, source = moving_bed_for(calibration, case) if method != "oracle" else _true_bed(case)
     return result if bed is None else with_moving_bed(result, bed, source)
 

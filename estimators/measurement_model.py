@@ -421,6 +421,13 @@ class SurveyModel:
             names = [f"moving_bed_{a}" for a in NED[:2]] if n_bed == 1 else \
                 [f"moving_bed{j + 1}_{a}" for j in range(n_bed) for a in NED[:2]]
             self.bed = ca.reshape(u.add("moving_bed", names, BED_SCALE_M_S, -3.0, 3.0), 2, n_bed).T  # (n_bed, 2)
+        # ---- per run: the transducer depth the slant ranges imply (the entered draft is often off by cm; with the
+        # sensor in the head, H_O is defined with the vessel level and the head-frame lever arms miss its mount tilt)
+        self.depth_offsets = []
+        for k, run in enumerate(runs):
+            prefix = f"run{k + 1}/" if len(runs) > 1 else ""
+            self.depth_offsets.append(u.add(f"depth_offset{k}", [f"{prefix}transducer_depth_offset_m"], 0.05, -2.0, 2.0)
+                                      if run.use_ranges else 0.0)
         # ---- effects of the catalog (the diagnosis), each with its unknowns
         self.effect_terms = []
         for i, term in enumerate(effects):
@@ -564,7 +571,7 @@ class SurveyModel:
             bt_fun = bottom_track_function(att_c, timing, self.spec.tangential)
             self.bt_functions.append(bt_fun)
             depth = case.environment.depth_at_pings(N)
-            g_depth = centre_of_rotation_depth(case.environment.transducer_depth_m, self.r)
+            g_depth = centre_of_rotation_depth(case.environment.transducer_depth_m + self.depth_offsets[k], self.r)
             self.g_depth.append(g_depth)
             V = self.knot_syms[k]
             v_ping = ca.mtimes(ca.DM(hat_basis(pings.time_s, run.knots)), V) if V is not None else ca.MX(ca.DM.zeros(N, 3))

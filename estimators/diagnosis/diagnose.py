@@ -305,6 +305,11 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
             moving_bed = "constant"  # these very runs were calibrated: their bed is the base's
             pins.update({"moving_bed_north": float(bed[0]), "moving_bed_east": float(bed[1])})
             notes.append("moving bed pinned at the calibration's (these runs were calibrated)")
+        for k, case in enumerate(cases):  # a calibrated run's transducer depth, as its slant ranges gave it
+            own = _calibrated_run(calibration, case)
+            if own and own.get("transducer_depth_offset_m") is not None and runs[k].use_ranges:
+                name = "transducer_depth_offset_m" if len(cases) == 1 else f"run{k + 1}/transducer_depth_offset_m"
+                pins[name] = float(own["transducer_depth_offset_m"])
         for group, value in (calibration.get("noise_sigma") or {}).items():
             if isinstance(value, (int, float)) and value > 0:
                 for k in range(len(runs)):
