@@ -549,19 +549,20 @@ def _diagnose_selftest(args) -> int:
     if args.out:
         check_output_file(args.out)
     config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
-    draws = draw_cases(args.selftest, args.seed, config.effects)
+    platforms = tuple(args.platforms) if args.platforms else None
+    draws = draw_cases(args.selftest, args.seed, config.effects, **({"platforms": platforms} if platforms else {}))
     rows = []
-    for label, params, seed in tqdm(draws, desc="self-test", unit="case"):
-        rows.append(run_one(label, params, seed, args.scenario, config))
+    for label, params, seed, platform, slow, ar1 in tqdm(draws, desc="self-test", unit="case"):
+        rows.append(run_one(label, params, seed, platform, config, slow, ar1))
         r = rows[-1]
-        tqdm.write(f"{r['truth']:>26s} -> {r['verdict']:<26s} gap {r['gap_before']:.3f} -> {r['gap_after']:.3f}  "
-                   f"where {r['where_top']}  ({r['seconds']:.0f} s)")
+        tqdm.write(f"{platform:>14s} {r['expected']:>26s} -> {r['verdict']:<34s} gap {r['gap_before']:.3f} -> "
+                   f"{r['gap_after']:.3f}  where {r['where_top']}  ({r['seconds']:.0f} s)")
     summary = summarise(rows, list(config.effects))
     print(format_summary(summary))
     if args.out:
         with atomic_path(args.out) as tmp:
             with open(tmp, "w") as fh:
-                json.dump(_jsonable({"seed": args.seed, "n": args.selftest, "scenario": args.scenario,
+                json.dump(_jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
                                      "config": {"effects": list(config.effects), "bic_margin": config.bic_margin,
                                                 "min_shrink": config.min_shrink, "gap_z": config.gap_z,
                                                 "min_gap": config.min_gap},
@@ -723,7 +724,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="auto | model (damped-mode motion model) | samples (the sensor's samples, runs no model follows)")
     s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
-    s.add_argument("--scenario", default="diag_boat", help="scenario the self-test simulates")
+    s.add_argument("--platforms", nargs="+", choices=["launch_vessel", "launch_head", "pool", "survey_ship", "river"],
+                   help="self-test platforms to draw from (default: all)")
     s.set_defaults(func=cmd_diagnose)
 
     s = sub.add_parser("bench", help="benchmarks with their targets")
@@ -824,7 +826,10 @@ def _holds_stderr(args) -> bool:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help (0) or an option error, said in one line by the parser (2)
+        return int(exc.code or 0)
     held = _HeldStderr() if _holds_stderr(args) else contextlib.nullcontext()
     error = None
     try:

@@ -35,7 +35,7 @@ from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 from ..models.rotations import euler_matrix
 from ..models.sensors import compass_correction
 from .asc import Correction
-from .attitude_fit import fit_attitude
+from .attitude_fit import fit_attitude, sampled_attitude
 
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
 
@@ -257,7 +257,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
         case = with_heading_misalignment(case, calibration)
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
         if attitude is None and calibration.get("attitude_source") == "samples":  # as the calibration's beams
-            attitude = SampledAttitude(case.attitude.time_s, case.attitude.ypr())
+            attitude = sampled_attitude(case)
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"
     if method in ("rootfinder", "oracle"):

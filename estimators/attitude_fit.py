@@ -246,3 +246,17 @@ def fit_attitude(case: Case, max_modes: int = 3, fixed_modes: int | None = None,
     )
     sig_heading = float(np.sqrt(rss / max(t.size - k, 1)))
     return AttitudeFit(params, np.array([sig_heading, *sig_tilt]), order, trail)
+
+
+def sampled_attitude(case: Case, fit: AttitudeFit | None = None):
+    """The sensor's complete samples as the attitude (:class:`~adcpdyn.models.motion.SampledAttitude`),
+    smoothed within the motion band of the pre-fit's modes: one recipe for the calibration, the
+    corrections and the diagnosis, so that all three put the same attitude in the beams."""
+    from ..models.motion import SampledAttitude
+
+    fit = fit or fit_attitude(case)
+    a = case.attitude
+    ypr = a.ypr()
+    ok = np.all(np.isfinite(ypr), axis=1)
+    modes = np.asarray(fit.params.modes)
+    return SampledAttitude(a.time_s[ok], ypr[ok], band_rad_s=float(np.max(modes[:, 0])) if modes.size else None)

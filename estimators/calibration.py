@@ -45,6 +45,7 @@ from .uncertainty import uncertainty
 
 TIMINGS = ("auto", "shallow", "deep", "exact")
 ATTITUDES = ("auto", "model", "samples")
+MIN_PINGS = 3  # a velocity curve and a residual need a few pings
 MIN_SAMPLES_PER_PERIOD = 4  # attitude samples per motion period below which no motion model is identifiable
 # attitude pre-fit residual (heading, pitch, roll) above which the motion model does not follow the sensor:
 # several times a compass's / an inclinometer's noise (the paper's pool: 0.5 / 0.17 deg)
@@ -259,6 +260,9 @@ class CalibrationProblem:
         if not self.cases:
             raise ValueError("cases: expected at least one case")
         names = [c.name for c in self.cases]
+        for case in self.cases:
+            if case.pings.n < MIN_PINGS:
+                raise ValueError(f"{case.name}: /pings/time_s: expected at least {MIN_PINGS} pings to calibrate, got {case.pings.n}")
         if len(set(names)) != len(names):
             raise ValueError(f"cases: expected distinct case names (results are keyed by them), got {names}")
         self.config = config

@@ -42,7 +42,7 @@ from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE, Attit
                              with_extra_mode)
 from ..models.rotations import course_difference_rad, euler_matrix, unskew
 from ..models.sensors import compass_correction, reference_point_velocity
-from .attitude_fit import AttitudeFit
+from .attitude_fit import AttitudeFit, sampled_attitude
 from .formulations import AXES, lever_block
 from .row_jacobian import RowBlock, RowJacobian
 
@@ -217,10 +217,16 @@ class RunSetup:
         if self.attitude_source not in ATTITUDE_SOURCES:
             raise ValueError(f"attitude_source: expected one of {list(ATTITUDE_SOURCES)}, got {self.attitude_source!r}")
         if self.attitude_source == "samples":
-            a = self.case.attitude
-            ypr = a.ypr()
-            ok = np.all(np.isfinite(ypr), axis=1)
-            self.samples = SampledAttitude(a.time_s[ok], ypr[ok])
+            self.samples = sampled_attitude(self.case, self.fit)
+
+    def covered(self, times) -> np.ndarray:
+        """Rows the beams' attitude covers: all with a motion model; with the sensor's samples only
+        those inside the samples' span (samples are interpolated, never extrapolated: a ping 0.14 s
+        before the first sample, just after a release from a heel, carried 0.1 m/s of error)."""
+        times = np.asarray(times, dtype=float)
+        if self.samples is None:
+            return np.ones(times.shape, dtype=bool)
+        return (times >= self.samples.time_s[0]) & (times <= self.samples.time_s[-1])
 
     @property
     def moving_reference(self) -> bool:
@@ -593,14 +599,15 @@ class SurveyModel:
             radial, rng = radial * radial_scale, rng * range_scale
             n_nodes += bt_fun.n_instructions() * N
             bt = pings.bt_radial_m_s
+            covered = run.covered(pings.time_s)
             for i in range(4):
                 models.append(ca.transpose(radial[i, :]) - np.nan_to_num(bt[:, i]))
-                channels.append(Channel(k, f"bt_beam{i + 1}", pings.time_s, np.isfinite(bt[:, i]).astype(float)))
+                channels.append(Channel(k, f"bt_beam{i + 1}", pings.time_s, (np.isfinite(bt[:, i]) & covered).astype(float)))
             if run.use_ranges:
                 for i in range(4):
                     models.append(ca.transpose(rng[i, :]) - np.nan_to_num(pings.bt_range_m[:, i]))
                     channels.append(Channel(k, f"range_beam{i + 1}", pings.time_s,
-                                            np.isfinite(pings.bt_range_m[:, i]).astype(float)))
+                                            (np.isfinite(pings.bt_range_m[:, i]) & covered).astype(float)))
             if run.moving_reference:
                 t_ref, v_meas = run.reference_time_s, run.reference_velocity_m_s
                 L = t_ref.size
@@ -610,9 +617,10 @@ class SurveyModel:
                 for e, th in terms:
                     v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
                 v_ref = REFERENCE_VELOCITY.map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
+                covered = run.covered(t_ref)
                 for j in range(3):
                     models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
-                    channels.append(Channel(k, f"reference_{NED[j]}", t_ref, np.isfinite(v_meas[:, j]).astype(float)))
+                    channels.append(Channel(k, f"reference_{NED[j]}", t_ref, (np.isfinite(v_meas[:, j]) & covered).astype(float)))
                 n_nodes += att_c.n_instructions() * L
         if self.has_prior:  # N(0, prior^2) on B and C: a pseudo-run of its own, outside the runs' time bins
             models.append(self.heading[1:3])

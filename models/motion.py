@@ -286,7 +286,8 @@ def local_attitude_params(time_s, ypr_rad, times) -> np.ndarray:
 
 SAMPLE_INTERPOLATIONS = ("spline", "linear")
 MIN_SPLINE_SAMPLES = 5
-GCV_OVERSMOOTH = 15.0  # residual ratio GCV / low-pass: 6-8 where GCV is right (noise 0.4 deg about a slow wander, 90 samples), ~26 where it wiped out a roll at 6 samples per period
+BAND_RESPONSE = 0.98  # the smoothing keeps this much of the amplitude at the top of the motion band
+BAND_MARGIN = 1.2  # the band's top: this times the fastest motion mode
 
 
 @dataclass(frozen=True)
@@ -294,16 +295,20 @@ class SampledAttitude:
     """The sensor's samples as the attitude (:func:`local_attitude_function` about each time): what
     the calibration, corrections and diagnosis use where no motion model follows the run.
 
-    ``interpolation``: ``spline`` (default: a smoothing spline per axis, its smoothing chosen by
-    generalised cross-validation, so the angle and rate at each time come from the samples around
-    it, not from one noisy difference: the secant of a linear segment is the rate at its midpoint,
-    and at 6 samples per roll period it is off by 15-30 %, which biased lever arms and looked like
-    effects in the diagnosis) or ``linear`` (the samples joined by straight lines).
+    ``interpolation``: ``spline`` (default) takes each time's angle and rate from a smoothing
+    spline per axis that keeps the motion band and rejects the noise above it: the response of
+    the spline's penalty, about 1 / (1 + lambda dt omega^4), is ``BAND_RESPONSE`` at the top of
+    the band (``BAND_MARGIN`` times ``band_rad_s``, the fastest motion mode; half the Nyquist
+    frequency when no band is given, and never above). The secant of a linear segment is the
+    rate at the segment's midpoint, 15-30 % off at 6 samples per roll period, and differences
+    the sensor's noise: it biased lever arms and looked like effects in the diagnosis.
+    ``linear`` joins the samples with straight lines.
     """
 
     time_s: np.ndarray
     ypr_rad: np.ndarray
     interpolation: str = "spline"
+    band_rad_s: float | None = None
 
     def __post_init__(self):
         if self.interpolation not in SAMPLE_INTERPOLATIONS:
@@ -311,10 +316,6 @@ class SampledAttitude:
 
     @functools.cached_property
     def _splines(self):
-        """Per axis: the smoothing spline of generalised cross-validation, unless it removed the
-        signal (a residual over ``GCV_OVERSMOOTH`` times that of a low-pass at half the Nyquist
-        frequency: an oscillation of few samples per period looks like noise to GCV), then that
-        low-pass (lambda from the response 1 / (1 + lambda dt omega^4), 95 % at omega_c)."""
         from scipy.interpolate import make_smoothing_spline
 
         t = np.asarray(self.time_s, dtype=float)
@@ -323,14 +324,11 @@ class SampledAttitude:
         if t.size < MIN_SPLINE_SAMPLES:
             return None
         dt = float(np.median(np.diff(t)))
-        omega_c = 0.5 * np.pi / dt
-        lam_lowpass = (1 / 0.95 - 1) / (dt * omega_c**4)
-        out = []
-        for j in range(3):
-            gcv, low = make_smoothing_spline(t, ypr[:, j]), make_smoothing_spline(t, ypr[:, j], lam=lam_lowpass)
-            rms = lambda s: float(np.sqrt(np.mean((s(t) - ypr[:, j]) ** 2)))
-            out.append(low if rms(gcv) > GCV_OVERSMOOTH * max(rms(low), 1e-12) else gcv)
-        return out
+        top = 0.5 * np.pi / dt  # half the Nyquist frequency
+        if self.band_rad_s:
+            top = min(top, BAND_MARGIN * float(self.band_rad_s))
+        lam = (1 / BAND_RESPONSE - 1) / (dt * top**4)
+        return [make_smoothing_spline(t, ypr[:, j], lam=lam) for j in range(3)]
 
     def params_at(self, times) -> np.ndarray:
         splines = self._splines if self.interpolation == "spline" else None

@@ -39,8 +39,10 @@ def _write(tmp_path, d, name="c.json"):
 
 def test_what_calibrate_writes_is_valid_and_schema_version_2_with_new_keys_too(written, tmp_path):
     d, _ = written
-    assert "schema_version" not in d  # files written so far: version 1
+    assert d["schema_version"] == 2  # what calibrate writes
     assert read_calibration(_write(tmp_path, d)) == d
+    v1 = {k: v for k, v in d.items() if k != "schema_version"}  # files of earlier versions carry no version: 1
+    assert read_calibration(_write(tmp_path, v1, "v1.json")) == v1
     v2 = {**d, "schema_version": 2, "moving_bed_velocity_m_s": [0.1, -0.05], "moving_bed_velocity_se_m_s": None,
           "compass_deviation_rad": {"sin": 0.01, "cos": -0.02}, "magnetic_declination_rad": None,
           "compass_error_rad": 0.03, "runs": [{"case": "a.h5", "moving_bed_velocity_m_s": [0.0, 0.2],
