@@ -39,7 +39,7 @@ from ..calibration import ATTITUDES, choose_attitude
 from ..measurement_model import (EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre, initial_noise,
                                  knot_times, reference_rows)
 from . import where as where_mod
-from .model import DiagnosisBase, Fit, GapModel, Pins, base_attitude, group_of, residual_peaks
+from .model import DiagnosisBase, Fit, GapModel, Pins, residual_peaks
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
@@ -260,7 +260,6 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
         own = _calibrated_run(calibration, case)
         if own and own.get("attitude_model"):  # this very run was calibrated: its motion model starts the fit
             af = dataclasses.replace(af, params=AttitudeParams.from_dict(own["attitude_model"]))
-        af = base_attitude(af)
         source, reason = choose_attitude(case, af, config.attitude)
         knots = knot_times(case, None)
         runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None,
@@ -317,7 +316,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
     spec = ModelSpec(formulation="minimal", lever_box_m=0.5 * v.length_m if v.length_m else 10.0,
                      installation=installation, nominal_installation_ypr_rad=nominal,
                      yaw_centre_rad=course_offset_rad(runs) if installation == "estimate" or heading != "off" else 0.0,
-                     heading=heading, moving_bed=moving_bed, min_decay_1_s=0.01)
+                     heading=heading, moving_bed=moving_bed)
     for k, run in enumerate(runs):
         for group, value in initial_noise(run.case, run.fit, run.attitude_source == "model").items():
             if group in INDEPENDENT_NOISE or (k, group) not in sigma0:
@@ -363,6 +362,9 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
         return False, "a moving bed is indistinguishable from vessel motion without a reference"
     if name == "surge":
         return False, "part of the base: its navigation (piecewise-linear velocity through the reference or bottom track) follows speed changes"
+    if name == "forced_roll":
+        return False, ("part of the base: its motion model's modes may be steady (wave-forced), as the calibration's; an "
+                       "oscillation it misses shows as a gap at its frequency")
     if name == "installation_misalignment" and base.spec.installation == "estimate":
         return False, "part of the base: the installation angles are estimated against the moving reference"
     if name == "deep_water_timing" and base.runs[0].timing != "shallow":

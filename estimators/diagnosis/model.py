@@ -17,17 +17,15 @@ re-estimated without rebuilding.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
 from ...solvers.multistart import SolverOptions, build_solver, multistart
-from ..attitude_fit import AttitudeFit, periodogram_peak
+from ..attitude_fit import periodogram_peak
 from ..measurement_model import EffectTerm, ModelSpec, SurveyModel, channel_slices, hat_basis
 
-MIN_FREE_DECAY_1_S = 0.01  # the base's modes decay freely; a steady (wave-forced) oscillation is an effect
 GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference")
 
 
@@ -232,10 +230,32 @@ class GapModel:
                 v[k] = np.nan
         return v
 
+    def _beam_directions(self, fit: Fit, run: int) -> np.ndarray:
+        """(N, 4, 3) Earth beam directions at the ping times from the fitted attitude."""
+        from ...models.motion import AttitudeParams, evaluate_attitude
+        from ...models.rotations import euler_matrix
+
+        rs = self.base.runs[run]
+        t = rs.case.pings.time_s
+        if rs.attitude_source == "samples":
+            Lam = evaluate_attitude(rs.samples, t)["Lambda"]
+        else:
+            idx = self.model.unknowns.index(f"attitude{run}")
+            p = AttitudeParams.unpack(fit.x[idx], rs.fit.params.layout) if idx.size else rs.fit.params
+            Lam = evaluate_attitude(p, t)["Lambda"]
+        ypr = [fit.x[self.names.index(n)] if n in self.names else 0.0
+               for n in ("installation_yaw", "installation_pitch", "installation_roll")]
+        if self.model.spec.installation == "fixed":
+            ypr = self.model.spec.nominal_installation_ypr_rad
+        Lst = np.asarray(euler_matrix(*ypr)) if not self.model.head_sensor else np.eye(3)
+        return np.einsum("nij,jk,bk->nbi", Lam, Lst, self.model.beam_dirs_t)
+
     def _dradial_dv(self, fit: Fit, run: int) -> np.ndarray:
         """(N, 4, 3) d radial / d v of each ping: the bottom-track rows' Jacobian on the knots,
         taken through the interpolation weight of the ping's nearest knot."""
         rs = self.base.runs[run]
+        if rs.knots is None:  # a stationary run: the beam directions (Eq. 52, first order)
+            return self._beam_directions(fit, run)
         u = self.model.unknowns
         cols = u.index(f"velocity{run}").reshape(-1, 3)
         sl = self.channel_slices()
@@ -251,15 +271,6 @@ class GapModel:
                 denom = np.sum(H * H, axis=1)
                 out[:, i, a] = np.sum(dk * H, axis=1) / np.where(denom > 0, denom, 1.0)
         return out
-
-
-def base_attitude(fit: AttitudeFit) -> AttitudeFit:
-    """The pre-fit with its modes as free decays (a steady oscillation is not a free decay)."""
-    p = fit.params
-    modes = p.modes.copy()
-    if modes.size:
-        modes[:, 1] = np.maximum(modes[:, 1], MIN_FREE_DECAY_1_S)
-    return dataclasses.replace(fit, params=dataclasses.replace(p, modes=modes))
 
 
 def residual_peaks(model: GapModel, fit: Fit) -> dict:
