@@ -115,6 +115,14 @@ class Attitude:
         heading[ok] = np.unwrap(heading[ok])
         return np.column_stack([heading, self.pitch_rad, self.roll_rad])
 
+    def ypr_at(self, times) -> np.ndarray:
+        """(n, 3) yaw, pitch, roll interpolated linearly to ``times`` over the complete samples,
+        heading unwrapped; the nearest sample held outside the record."""
+        ok = self.complete()
+        ypr = self.ypr()[ok]
+        t = np.asarray(self.time_s, dtype=float)[ok]
+        return np.column_stack([np.interp(times, t, ypr[:, j]) for j in range(3)])
+
     def complete(self) -> np.ndarray:
         """(M,) True where heading, pitch and roll are all finite (NaN: a missing sample)."""
         return np.isfinite(self.heading_rad) & np.isfinite(self.pitch_rad) & np.isfinite(self.roll_rad)

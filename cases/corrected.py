@@ -11,14 +11,36 @@ from __future__ import annotations
 
 import json
 
+from dataclasses import dataclass, field
+
 import h5py
 import numpy as np
 
 from .atomic import atomic_path
 
 
+@dataclass(frozen=True)
+class Correction:
+    """Per-ping velocities from one correction method (what ``/corrected`` holds).
+
+    vessel_velocity_m_s (N, 3) Earth frame; water_velocity_m_s (N, K, 3) or None, referenced
+    to the bottom track or the GNSS (``attrs["water_reference"]``);
+    water_relative_velocity_m_s (N, K, 3) or None, the water relative to the transducer (not
+    referenced); error_velocity_m_s (N,) (NaN where fewer than four beams); beams_used (N,) int.
+    """
+
+    method: str
+    time_s: np.ndarray
+    vessel_velocity_m_s: np.ndarray
+    error_velocity_m_s: np.ndarray
+    beams_used: np.ndarray
+    water_velocity_m_s: np.ndarray | None = None
+    attrs: dict = field(default_factory=dict)
+    water_relative_velocity_m_s: np.ndarray | None = None
+
+
 def write_correction(correction, path, source_case: str = "") -> None:
-    """Write a :class:`~adcpdyn.estimators.asc.Correction` to ``path`` atomically."""
+    """Write a :class:`Correction` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = "adcp-corrected"

@@ -192,9 +192,7 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
 
 def _attitude_variables(case: Case, data: dict) -> None:
     """Heading, pitch and roll at the pings (the sensor's samples interpolated, as the static correction uses them)."""
-    from ..estimators.asc import attitude_at
-
-    ypr = np.rad2deg(attitude_at(case, case.pings.time_s))
+    ypr = np.rad2deg(case.attitude.ypr_at(case.pings.time_s))
     frame = ("the ADCP head (internal sensor)" if case.attitude.frame == "transducer" else "the vessel")
     common = {"units": "degree", "comment": f"attitude sensor of {frame} (the CF platform), samples interpolated "
                                             "linearly to the pings, as recorded: no heading correction"}
@@ -212,11 +210,11 @@ def _site_variables(case: Case, data: dict, coords: dict) -> None:
     t = case.pings.time_s
     ref = case.reference
     if ref is not None and ref.velocity_m_s is not None:
-        from ..estimators.water import reference_velocity_at
+        from .coverage import reference_at
 
-        east, north, up = _enu(reference_velocity_at(case, t))
+        east, north, up = _enu(reference_at(case, t))
         note = ("reference velocity (GNSS) of the body point (" + ", ".join(f"{x:g}" for x in ref.point_body_m)
-                + ") m, interpolated linearly to the pings; NaN outside the reference's span")
+                + ") m, interpolated linearly to the pings; NaN beyond one sample interval of the reference's span")
         for name, values, word in (("reference_velocity_east", east, "eastward"),
                                    ("reference_velocity_north", north, "northward"),
                                    ("reference_velocity_up", up, "upward")):
@@ -379,9 +377,8 @@ def write_netcdf(dataset, path, *inputs) -> None:
 
 
 def correction_from_file(path):
-    """A :class:`~adcpdyn.estimators.asc.Correction` and its source case path from a file of ``adcpdyn correct``."""
-    from ..estimators.asc import Correction
-    from .corrected import read_correction
+    """A :class:`~adcpdyn.cases.corrected.Correction` and its source case path from a file of ``adcpdyn correct``."""
+    from .corrected import Correction, read_correction
 
     d = read_correction(path)
     with h5py.File(path, "r") as f:

@@ -29,12 +29,13 @@ import dataclasses
 import numpy as np
 
 from ..cases.case import Case
-from ..models.doppler import ratio_from_radial
+from ..models.doppler import ratio_from_radial, receive_time_paper, reported_range, slant_range
 from ..models.janus import beam_to_instrument
+from ..models.kinematics import centre_of_rotation_depth
 from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 from ..models.rotations import euler_matrix
 from ..models.sensors import compass_correction
-from .asc import Correction
+from ..cases.corrected import Correction
 from .attitude_fit import fit_attitude, sampled_attitude
 
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
@@ -67,8 +68,8 @@ def _transducer_depths(case: Case, Lam_T: np.ndarray, r: np.ndarray) -> np.ndarr
 
 
 def _g_depth(case: Case, r: np.ndarray) -> float:
-    """Depth of the centre of rotation G: below the level head's transducers by their mean r_z."""
-    return case.environment.transducer_depth_m - r[:, 2].mean()
+    """Depth of the centre of rotation G (:func:`~adcpdyn.models.kinematics.centre_of_rotation_depth`)."""
+    return centre_of_rotation_depth(case.environment.transducer_depth_m, r)
 
 
 def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str, timing: str = "deep",
@@ -83,8 +84,8 @@ def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangen
     u_T = np.sum(w_T * d_T, axis=-1)  # (N, 4)
     depth = case.environment.depth_at_pings(case.pings.n)[rows][:, None]
     v_meas = case.pings.bt_radial_m_s[rows]
-    l = (depth - _transducer_depths(case, Lam_T, r)) / d_T[..., 2] * (1 - np.nan_to_num(v_meas) / c)  # Eq. 67
-    t_R = t[:, None] + (np.zeros_like(l) if timing == "shallow" else 2 * l / c)  # Eq. 68; "shallow": no flight
+    l = reported_range(slant_range(depth, _transducer_depths(case, Lam_T, r), d_T[..., 2]), np.nan_to_num(v_meas), c)
+    t_R = np.broadcast_to(t[:, None], l.shape) if timing == "shallow" else receive_time_paper(t[:, None], l, c)  # Eq. 68
     d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential, t)
     u_R = np.sum(w_R * d_R, axis=-1)
     rho = ratio_from_radial(v_meas, c)
@@ -111,8 +112,8 @@ def _water(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, vessel_ve
     r = np.asarray(lever_arms_s, dtype=float)
     d_T, w_T, Lam_T = _beam_state(attitude, t[:, None], Lst, B, r, tangential)
     u_T = np.sum((w_T + vessel_velocity[:, None, :]) * d_T, axis=-1)  # (N, 4)
-    l = (cells[None, None, :] - _transducer_depths(case, Lam_T, r)[..., None]) / d_T[..., 2][..., None]  # Eq. 86
-    t_R = t[:, None, None] + (np.zeros_like(l) if timing == "shallow" else 2 * l / c)  # Eq. 87
+    l = slant_range(cells[None, None, :], _transducer_depths(case, Lam_T, r)[..., None], d_T[..., 2][..., None])  # Eq. 86
+    t_R = np.broadcast_to(t[:, None, None], l.shape) if timing == "shallow" else receive_time_paper(t[:, None, None], l, c)  # Eq. 87
     d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential, t)  # (N, 4, K, 3)
     u_R = np.sum((w_R + vessel_velocity[:, None, None, :]) * d_R, axis=-1)  # (N, 4, K)
     rho = ratio_from_radial(case.water.radial_m_s, c)  # (N, 4, K)

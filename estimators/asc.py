@@ -12,60 +12,21 @@ The tangential velocity of the swaying transducers is ignored: that is the point
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from ..cases.case import Case
-from ..models.janus import beam_to_instrument, three_beam_solution
-from ..models.rotations import euler_matrices, euler_matrix
-
-
-@dataclass(frozen=True)
-class Correction:
-    """Per-ping velocities from one correction method.
-
-    vessel_velocity_m_s (N, 3) Earth frame; water_velocity_m_s (N, K, 3) or None, referenced
-    to the bottom track or the GNSS (``attrs["water_reference"]``);
-    water_relative_velocity_m_s (N, K, 3) or None, the water relative to the transducer (not
-    referenced); error_velocity_m_s (N,) (NaN where fewer than four beams); beams_used (N,) int.
-    """
-
-    method: str
-    time_s: np.ndarray
-    vessel_velocity_m_s: np.ndarray
-    error_velocity_m_s: np.ndarray
-    beams_used: np.ndarray
-    water_velocity_m_s: np.ndarray | None = None
-    attrs: dict = field(default_factory=dict)
-    water_relative_velocity_m_s: np.ndarray | None = None
+from ..cases.corrected import Correction
+from ..models.frames import beams_to_earth, sensed_rotation
 
 
 def attitude_at(case: Case, times) -> np.ndarray:
-    """Sensed (yaw, pitch, roll) linearly interpolated to times, heading unwrapped, (n, 3).
-
-    Outside the sampled span the nearest sample is held.
-    """
-    ypr = case.attitude.ypr()
-    t = case.attitude.time_s
-    return np.column_stack([np.interp(times, t, ypr[:, j]) for j in range(3)])
+    """Sensed (yaw, pitch, roll) at times (:meth:`~adcpdyn.cases.case.Attitude.ypr_at`), (n, 3)."""
+    return case.attitude.ypr_at(times)
 
 
 def earth_rotation(case: Case, times, installation_ypr_rad) -> np.ndarray:
     """Transducer-to-Earth rotation at times from the attitude sensor, (n, 3, 3)."""
-    R = euler_matrices(attitude_at(case, times))
-    if case.attitude.frame == "vessel":
-        Ltb = np.asarray(euler_matrix(*np.asarray(installation_ypr_rad, dtype=float)))
-        R = R @ Ltb
-    return R
-
-
-def beams_to_earth(radial: np.ndarray, beam_dirs_t: np.ndarray, R: np.ndarray):
-    """Radial velocities (N, 4) -> Earth velocities (N, 3), error velocity (N,), beams used (N,)."""
-    v_t, n_good = three_beam_solution(beam_dirs_t, radial)
-    _, e = beam_to_instrument(beam_dirs_t)
-    err = np.where(n_good == 4, np.nan_to_num(radial) @ e, np.nan)
-    return np.einsum("nij,nj->ni", R, v_t), err, n_good
+    return sensed_rotation(attitude_at(case, times), case.attitude.frame, installation_ypr_rad)
 
 
 def asc(case: Case, installation_ypr_rad=None, water_reference: str = "bt") -> Correction:

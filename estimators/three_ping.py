@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cases.case import Case
-from ..models.doppler import ratio_from_radial
+from ..models.doppler import ratio_from_radial, receive_time_paper, slant_range
 from ..models.motion import evaluate_attitude
 from .attitude_fit import fit_attitude
 
@@ -66,8 +66,8 @@ def three_ping_solve(case: Case, timing: str = "shallow", tangential: str = "con
     elif timing == "deep":
         c = case.instrument.sound_speed_m_s
         depth = case.environment.depth_at_pings(t.size)[:, None]
-        l = (depth - case.environment.transducer_depth_m) / d_T[..., 2]
-        t_R = t[:, None] + 2 * l / c
+        l = slant_range(depth, case.environment.transducer_depth_m, d_T[..., 2])
+        t_R = receive_time_paper(t[:, None], l, c)
         rx = evaluate_attitude(fit.params, t_R.reshape(-1))
         Lr = rx["Lambda"].reshape(t.size, 4, 3, 3)
         dLr = (rx["dLambda_dt"] if tangential == "consistent" else rx["Omega"]).reshape(t.size, 4, 3, 3)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cases.case import Case
-from .asc import beams_to_earth
+from ..models.frames import beams_to_earth
 
 WATER_REFERENCES = ("bt", "gnss")
 
@@ -48,26 +48,15 @@ def check_reference(reference: str, case: Case | None = None) -> str:
 
 
 def reference_velocity_at(case: Case, times) -> np.ndarray:
-    """The reference point's Earth velocity (NED) at ``times``, (n, 3).
+    """The reference point's Earth velocity (NED) at ``times``, (n, 3)
+    (:func:`adcpdyn.cases.coverage.reference_at`: per component, never extrapolated beyond one
+    sample interval; zeros for a stationary reference); a one-line error without one."""
+    from ..cases.coverage import reference_at
 
-    Linear interpolation per component between the reference's samples; NaN outside
-    their span (never extrapolated); zeros for a stationary reference without samples.
-    """
-    t = np.asarray(times, dtype=float)
-    ref = case.reference
-    if ref is None:
-        raise ValueError(f"{case.name}: /reference: none in this case")
-    if ref.velocity_m_s is None:
-        if ref.stationary:
-            return np.zeros((t.size, 3))
-        raise ValueError(f"{case.name}: /reference/velocity_m_s: expected samples, got none")
-    out = np.full((t.size, 3), np.nan)
-    for j in range(3):
-        ok = np.isfinite(ref.velocity_m_s[:, j])
-        if ok.sum() >= 2:
-            tj, vj = ref.time_s[ok], ref.velocity_m_s[ok, j]
-            inside = (t >= tj[0]) & (t <= tj[-1])
-            out[inside, j] = np.interp(t[inside], tj, vj)
+    out = reference_at(case, times)
+    if out is None:
+        missing = "/reference: none in this case" if case.reference is None else "/reference/velocity_m_s: expected samples, got none"
+        raise ValueError(f"{case.name}: {missing}")
     return out
 
 

@@ -62,6 +62,13 @@ def slant_range(target_depth, transducer_depth, beam_dir_down):
     return (target_depth - transducer_depth) / beam_dir_down
 
 
+def reported_range(slant_range_m, radial_velocity, sound_speed):
+    """The range an instrument reports, c (t_R - t_T) / 2 = l (1 - u / c) to first order in u/c: the
+    echo returns to where the transducer has moved along the beam (u: the transducer's velocity
+    along the outward beam, the radial velocity in instrument sign)."""
+    return slant_range_m * (1 - radial_velocity / sound_speed)
+
+
 def receive_time_paper(transmit_time, slant_range_m, sound_speed):
     """t_R = t_T + 2 l / c (Eqs. 68, 87): the transducer assumed still during the flight."""
     return transmit_time + 2 * slant_range_m / sound_speed

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .doppler import bottom_echo_ratio, radial_from_ratio, receive_time_paper, slant_range
+from .doppler import bottom_echo_ratio, radial_from_ratio, receive_time_paper, reported_range, slant_range
 from .kinematics import beam_directions_earth, tangential_velocity_paper_literal, transducer_velocity_earth
 from .rotations import euler_matrix
 
@@ -75,7 +75,7 @@ def bottom_track_function(attitude_fun: ca.Function, timing: str, tangential: st
     d_T, v_T, z_T, Lam_T = state(t_T)
     u_tx = ca.sum2(v_T * d_T)
     l_out = slant_range(depth, z_T, d_T[:, 2])  # Eq. 67: transmit point to the bottom spot
-    l = l_out * (1 - u_tx / c)  # range the instrument reports, transducer moving along the beam
+    l = reported_range(l_out, u_tx, c)  # the transducer moves along the beam during the flight
     if timing == "shallow":
         radial = u_tx  # Eq. 52 in instrument sign
     else:

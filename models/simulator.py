@@ -20,11 +20,11 @@ import numpy as np
 
 from ..cases.case import Attitude, Case, Environment, Instrument, Pings, Position, Reference, Truth, Water, format_utc, parse_utc
 from ..cases.scenario import Scenario
-from .doppler import bottom_echo_ratio, radial_from_ratio, slant_range, water_echo_ratio
+from .doppler import bottom_echo_ratio, radial_from_ratio, receive_time_paper, slant_range, water_echo_ratio
 from .effects import Effect, get_effect
 from .geodesy import latitude_longitude_deg
 from .janus import janus_beam_directions, janus_transducer_positions
-from .kinematics import radius_vectors, transducer_state_function
+from .kinematics import centre_of_rotation_depth, radius_vectors, transducer_state_function
 from .motion import attitude_function, stack_matrices
 from .navigation import Track
 from .sensors import ar1_noise, irregular_times, quantise, reference_point_velocity, sensed_attitude, wrap_heading
@@ -51,7 +51,7 @@ class _Kinematics:
         trend = run.motion.yaw_trend
         t_ref = run.motion.t_ref_s
         self.heading_trend = lambda t: np.polynomial.polynomial.polyval(np.asarray(t) - t_ref, trend)
-        g_depth = run.transducer_depth_m - float(np.mean(self.radius_vectors[:, 2]))
+        g_depth = centre_of_rotation_depth(run.transducer_depth_m, self.radius_vectors)
         self.track = Track.integrate(run.navigation, run.t_start_s, run.t_start_s + run.duration_s, g_depth,
                                      self.heading_trend)
         self.navigation = run.navigation
@@ -108,7 +108,7 @@ def _echo(kin: _Kinematics, scenario: Scenario, t_T, tx, target_depth, c_true):
     e_tx = np.broadcast_to(d_T.reshape(d_T.shape[:2] + (1,) * len(extra) + (3,)), shape + (3,))
     v_tx = np.broadcast_to(vel_T.reshape(vel_T.shape[:2] + (1,) * len(extra) + (3,)), shape + (3,))
     u_tx = np.sum(v_tx * e_tx, axis=-1)
-    t_R = np.broadcast_to(expand(t_T[:, None] * np.ones((1, 4))), shape) + 2 * l / c_true  # Eq. 68
+    t_R = receive_time_paper(np.broadcast_to(expand(t_T[:, None] * np.ones((1, 4))), shape), l, c_true)  # Eq. 68, then exact
     if dm.timing == "instantaneous":
         return u_tx, u_tx.copy(), e_tx, e_tx.copy(), t_R, l
     spot = np.broadcast_to(pos_T.reshape(pos_T.shape[:2] + (1,) * len(extra) + (3,)), shape + (3,)) + l[..., None] * e_tx

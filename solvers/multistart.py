@@ -16,7 +16,6 @@ import numpy as np
 
 from .gauss_newton import GaussNewtonHessian
 
-_KEEP_ALIVE: list = []
 AUTO_GN_SIZE = 5_000  # nonzeros of the residual Jacobian's bounding box
 HESSIANS = ("auto", "gauss-newton", "exact", "limited-memory")
 
@@ -189,13 +188,15 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
                                            [lam_f * ca.triu(ca.mtimes(J.T, J))],
                                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
         else:  # assembled per-row Jacobian (scipy): the callback
-            hess = GaussNewtonHessian(jac, nlp["g"].shape[0])
-            opts["hess_lag"] = hess
-            _KEEP_ALIVE.append(hess)  # the callback must outlive the solver
+            callback = GaussNewtonHessian(jac, nlp["g"].shape[0])
+            opts["hess_lag"] = callback
     if like is not None:
         shared = [("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g")] + ([("hess_lag", "nlp_hess_l")] if hessian == "exact" else [])
         opts.update({opt: like.get_function(fn) for opt, fn in shared if like.has_function(fn)})
-    return ca.nlpsol(name, "ipopt", nlp, opts)
+    solver = ca.nlpsol(name, "ipopt", nlp, opts)
+    if "hess_lag" in opts and isinstance(opts["hess_lag"], GaussNewtonHessian):
+        solver.gauss_newton_callback = opts["hess_lag"]  # the callback lives as long as its solver, no longer
+    return solver
 
 
 def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: float = 1e-6,

@@ -390,3 +390,24 @@ def test_uncertainty_rank_is_not_set_by_one_near_exact_channel():
     # with an equality constraint z0 = z1, the feasible direction (1, 1, 0) / sqrt 2 carries both
     c = uncertainty(J, np.array([[1.0, -1.0, 0.0]]), ["heading_bias", "P_x", "P_y"], np.ones(3))
     assert c.se_z[0] == pytest.approx(1 / np.sqrt(1e14 + 9e12 + 1.0), rel=1e-9)
+
+
+def test_gauss_newton_callback_lives_with_its_solver_not_forever():
+    """The assembled Jacobian's Hessian callback is held by its solver: solvers built and dropped
+    in a long batch leave nothing behind (a module-level list used to keep every one)."""
+    import gc
+    import weakref
+
+    from adcpdyn.solvers.gauss_newton import GaussNewtonHessian
+
+    sc = get_scenario("deep_ship")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=15.0)), seed=1)
+    problem = CalibrationProblem(case, CalibrationConfig(n_starts=1, jacobian="assembled", workers=1,
+                                                         solver=SolverOptions(hessian="gauss-newton")))
+    callback = problem.solver.gauss_newton_callback
+    assert isinstance(callback, GaussNewtonHessian)
+    ref = weakref.ref(callback)
+    assert _quiet_calibrate(case, n_starts=1, jacobian="assembled", workers=1, solver=SolverOptions(hessian="gauss-newton")).success
+    del problem, callback
+    gc.collect()
+    assert ref() is None

@@ -212,7 +212,7 @@ def _position(track, offset: float, t_abs, case: Case) -> tuple[Position | None,
 
 def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dict]:
     """Attach the GNSS reference velocity when the file carries usable NMEA."""
-    from ...estimators.asc import asc
+    from ...models.frames import beams_to_earth, sensed_rotation
 
     try:
         coarse = gnss.coarse_offset(ds)
@@ -223,7 +223,9 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
         attrs["/provenance"]["gnss"] = f"none: {exc}"
         attrs["/provenance"]["time_origin_utc_source"] = "none: no GNSS ties the ADCP clock to UTC (time_origin_utc absent)"
         return case, attrs
-    v_bt = asc(case).vessel_velocity_m_s
+    t = case.pings.time_s  # bottom track turned to the Earth with the recorded attitude (no lever arms)
+    v_bt = beams_to_earth(case.pings.bt_radial_m_s, case.instrument.beam_directions(),
+                          sensed_rotation(case.attitude.ypr_at(t), case.attitude.frame))[0]
     offset, peak, refined = gnss.refine_offset(track, t_abs, v_bt, coarse)
     stats = gnss.compare(track, offset, t_abs, v_bt)
     position, origin = _position(track, offset, t_abs, case)
