@@ -41,7 +41,7 @@ def cmd_simulate(args) -> int:
     from .cases.io import write_case
     from .cases.scenario import get_scenario
     from .cases.atomic import check_output_file
-    from .models.simulator import simulate
+    from .cases.simulation import simulate
 
     survey_options = {"--compass-deg": args.compass_deg, "--bed-speed": args.bed_speed, "--bed-profile": args.bed_profile}
     if args.runs is None:
@@ -444,7 +444,7 @@ def cmd_demo(args) -> int:
     from .estimators.evaluation import calibration_errors
     from .estimators.metrics import format_table, velocity_metrics
     from .models.rotations import euler_matrix
-    from .models.simulator import simulate
+    from .cases.simulation import simulate
     from .plots import attitude_fit_figure, radius_vectors_figure, velocity_figure
 
     from .cases.atomic import check_output_folder

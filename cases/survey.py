@@ -256,7 +256,7 @@ def simulate_survey(name: str, runs: int, seed: int, **options) -> list:
     import dataclasses
     import json
 
-    from ..models.simulator import simulate
+    from .simulation import simulate
 
     cases = []
     scenarios = survey_scenarios(name, runs, seed, **options)

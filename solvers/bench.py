@@ -35,7 +35,7 @@ def bench_calibration(seeds: int = 20, starts: int = 8, deep_seeds: int = 2) -> 
     from ..cases.scenario import get_scenario
     from ..estimators.evaluation import calibration_errors
     from ..estimators.qiao import qiao_calibration
-    from ..models.simulator import simulate
+    from ..cases.simulation import simulate
 
     methods = {
         "joint_exact": dict(formulation="exact"),
@@ -175,7 +175,7 @@ def bench_correction(sizes) -> dict:
     from ..estimators.asc import asc
     from ..estimators.attitude_fit import fit_attitude
     from ..models.rotations import euler_matrix
-    from ..models.simulator import simulate
+    from ..cases.simulation import simulate
     from .rootfinder import RootfinderOptions
 
     base = simulate(get_scenario("pool_m1"), seed=1)

@@ -18,7 +18,7 @@ def bench_formulations(seeds: int, starts: int) -> dict:
     from ..cases.scenario import get_scenario
     from ..estimators.calibration import CalibrationConfig
     from ..estimators.formulation_compare import compare_formulations
-    from ..models.simulator import simulate
+    from ..cases.simulation import simulate
 
     out = {"suite": "formulations", "machine": machine(), "seeds": list(range(1, seeds + 1)), "starts": starts,
            "scenarios": {}}

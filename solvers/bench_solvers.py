@@ -58,7 +58,7 @@ def _child(starts: int, seed: int, options: str) -> None:
     """Entry of a variant run in its own process (compilation may outlast its time limit)."""
     from ..cases.scenario import get_scenario
     from ..estimators.attitude_fit import fit_attitude
-    from ..models.simulator import simulate
+    from ..cases.simulation import simulate
 
     case = simulate(get_scenario("pool_m0"), seed=seed)
     print(json.dumps(_row(case, fit_attitude(case, max_modes=3), starts, seed, SolverOptions(**json.loads(options)))))
@@ -84,7 +84,7 @@ def bench_solvers(starts: int, seed: int = 1, jit: bool = True, jit_time_limit_s
     """Each variant on pool_m0 (seed ``seed``), then the 32-start multistart target."""
     from ..cases.scenario import get_scenario
     from ..estimators.attitude_fit import fit_attitude
-    from ..models.simulator import simulate
+    from ..cases.simulation import simulate
     from .linear_solvers import available_linear_solvers
 
     case = simulate(get_scenario("pool_m0"), seed=seed)

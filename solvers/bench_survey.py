@@ -33,7 +33,7 @@ BT_AR1, REFERENCE_AR1 = 0.7, 0.5
 
 def _transects(runs: int, seed: int, fast: bool = False, noise: dict | None = None, **options) -> list:
     from ..cases.survey import survey_scenarios
-    from ..models.simulator import simulate
+    from ..cases.simulation import simulate
 
     cases = []
     for k, sc in enumerate(survey_scenarios("river_survey", runs, seed, **options)):

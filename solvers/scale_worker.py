@@ -28,7 +28,7 @@ def long_run(n_pings: int):
 def measure(n_pings: int, seed: int) -> dict:
     """Simulate, then calibrate (one start, one worker) and time each step; peak RSS in MB."""
     from ..estimators.evaluation import calibration_errors
-    from ..models.simulator import simulate
+    from ..cases.simulation import simulate
     from .bench_common import timed_calibration
     from .multistart import SolverOptions
 

@@ -13,7 +13,7 @@ from adcpdyn.cli import main
 from adcpdyn.estimators.adc import dynamic_correction
 from adcpdyn.estimators.asc import asc
 from adcpdyn.models.rotations import euler_matrix
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 
 def truth_calibration(case) -> dict:

@@ -19,7 +19,7 @@ from adcpdyn.estimators.evaluation import calibration_errors, true_attitude
 from adcpdyn.models.measurement import bottom_track_function
 from adcpdyn.models.motion import attitude_function
 from adcpdyn.models.rotations import euler_matrix
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 Z_MAX = 3.5  # |error / se| for a single estimate
 

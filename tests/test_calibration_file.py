@@ -13,7 +13,7 @@ from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
 from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
 from adcpdyn.estimators.calibration_file import KEYS, lever_arms, read_calibration, validate_calibration
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 
 @pytest.fixture(scope="module")

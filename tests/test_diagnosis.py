@@ -14,7 +14,7 @@ from adcpdyn.estimators.diagnosis import where
 from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, _cv_residuals, diagnose
 from adcpdyn.estimators.diagnosis.selftest import oracle_shrink, with_effect
 from adcpdyn.models.effects import CATALOG, get_effect
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 ISSUE_EFFECTS = {"attitude_latency", "sound_speed_error", "beam_angle_error", "heave", "surge", "forced_roll",
                  "compass_deviation", "tilt_lowpass", "moving_bed", "reference_lever_arm",

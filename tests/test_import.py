@@ -236,7 +236,7 @@ def _chatty_import(ok: bool):
         if not ok:
             raise ImportFailure(f"{path}: could not read the file (KeyError: 377)")
         from adcpdyn.cases.scenario import get_scenario
-        from adcpdyn.models.simulator import simulate
+        from adcpdyn.cases.simulation import simulate
 
         return simulate(get_scenario("pool_m0"), seed=1), {"/provenance": {"gnss": "none", "coordinate_system_found": "beam"}}
     return fake

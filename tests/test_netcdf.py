@@ -18,7 +18,7 @@ from adcpdyn.cases.netcdf import export_file, to_xarray, write_netcdf
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
 from adcpdyn.estimators.correct_case import correct_case
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")

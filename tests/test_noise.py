@@ -9,7 +9,7 @@ import pytest
 
 from adcpdyn.cases.scenario import Noise, get_scenario
 from adcpdyn.models.sensors import ar1_noise
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 
 def lag1(x) -> float:

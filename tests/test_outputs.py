@@ -51,7 +51,7 @@ KILLED_WRITER = textwrap.dedent("""
     import sys, time
     from adcpdyn.cases import io
     from adcpdyn.cases.scenario import get_scenario
-    from adcpdyn.models.simulator import simulate
+    from adcpdyn.cases.simulation import simulate
 
     write = io._write
     def slow_write(f, case):

@@ -14,7 +14,8 @@ from adcpdyn.models.empirical import motion_guess
 from adcpdyn.models.kinematics import radius_vectors
 from adcpdyn.models.motion import AttitudeParams, attitude_function, damped_mode, evaluate_attitude
 from adcpdyn.models.rotations import euler_matrices, euler_matrix, matrix_euler
-from adcpdyn.models.simulator import _echo, _Kinematics, simulate
+from adcpdyn.cases.simulation import simulate
+from adcpdyn.models.simulator import echo_geometry, Kinematics
 
 FD_TOL = 1e-6  # finite differences against algorithmic differentiation
 EXACT_TOL = 1e-9  # identities that hold to rounding
@@ -145,7 +146,7 @@ def test_doppler_conversion_round_trips():
 
 def test_no_rotation_radials_are_v_dot_d_and_asc_recovers_velocity(pool_still):
     case = simulate(noise_free(pool_still), seed=4)
-    kin = _Kinematics(noise_free(pool_still))
+    kin = Kinematics(noise_free(pool_still))
     tx = kin.at(case.pings.time_s)
     expected = np.sum(tx["velocity"] * tx["d"], axis=-1)  # V_T . d
     assert np.max(np.abs(case.pings.bt_radial_m_s - expected)) < EXACT_TOL
@@ -170,9 +171,9 @@ def _two_way_vs_instantaneous(scenario):
     sc = noise_free(scenario)
     two_way = simulate(sc, seed=5).pings.bt_radial_m_s
     inst = simulate(with_doppler(sc, timing="instantaneous"), seed=5).pings.bt_radial_m_s
-    kin = _Kinematics(sc)
+    kin = Kinematics(sc)
     t_T = simulate(sc, seed=5).pings.time_s
-    u_tx, u_rx, _, _, t_R, _ = _echo(kin, sc, t_T, kin.at(t_T), np.full((t_T.size, 1), sc.run.water_depth_m),
+    u_tx, u_rx, _, _, t_R, _ = echo_geometry(kin, sc, t_T, kin.at(t_T), np.full((t_T.size, 1), sc.run.water_depth_m),
                                      sc.platform.instrument.sound_speed_m_s)
     return two_way, inst, u_tx, u_rx
 
@@ -193,12 +194,12 @@ def test_deep_water_two_way_differs_from_instantaneous():
 
 def test_exact_travel_time_closes_the_geometry():
     sc = noise_free(get_scenario("deep_ocean"))
-    kin = _Kinematics(sc)
+    kin = Kinematics(sc)
     t_T = np.linspace(0, 100, 30)
     tx = kin.at(t_T)
     c = sc.platform.instrument.sound_speed_m_s
     H = np.full((30, 1), sc.run.water_depth_m)
-    _, _, e_tx, _, t_R, l = _echo(kin, sc, t_T, tx, H, c)
+    _, _, e_tx, _, t_R, l = echo_geometry(kin, sc, t_T, tx, H, c)
     spot = tx["position"] + l[..., None] * e_tx
     rx = kin.at(t_R)
     pos_R = rx["position"][np.arange(30)[:, None], np.arange(4)[None, :], np.arange(4)[None, :]]
@@ -210,7 +211,7 @@ def test_exact_travel_time_closes_the_geometry():
 def test_reference_velocity_is_lever_arm_consistent():
     sc = noise_free(get_scenario("deep_ship"))
     case = simulate(sc, seed=1)
-    kin = _Kinematics(sc)
+    kin = Kinematics(sc)
     t = case.reference.time_s[:20]
     p = case.reference.point_body_m
     h = 1e-4

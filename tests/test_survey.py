@@ -12,7 +12,7 @@ import pytest
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem, calibrate, calibrate_runs
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 Z_MAX = 3.5
 MISALIGNMENT_RAD = 0.25  # true heading = sensor heading + 0.25 rad: the compass reads psi - 0.25

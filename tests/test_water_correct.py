@@ -17,7 +17,7 @@ from adcpdyn.estimators.correct_case import correct_case, with_moving_bed
 from adcpdyn.estimators.water import check_reference, reference_velocity_at
 from adcpdyn.models.motion import AttitudeParams, evaluate_attitude
 from adcpdyn.models.rotations import euler_matrix
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 
 def truth_calibration(case) -> dict:

@@ -24,7 +24,7 @@ import numpy as np
 
 from ...cases.scenario import Scenario, get_scenario
 from ...models.effects import get_effect
-from ...models.simulator import simulate
+from ...cases.simulation import simulate
 from .diagnose import DiagnosisConfig, _cv_residuals, _gap, diagnose
 
 NONE = "none"
