@@ -20,7 +20,7 @@ from ..models.doppler import radial_from_ratio, water_echo_ratio, bottom_echo_ra
 from ..models.effects import get_effect
 from ..models.geodesy import latitude_longitude_deg
 from ..models.sensors import ar1_noise, irregular_times, quantise, reference_point_velocity, sensed_attitude, wrap_heading
-from ..models.simulator import echo_geometry, heading_truth, Kinematics, site_plane
+from ..models.simulator import Kinematics, echo_geometry, heading_truth as effective_heading, site_plane
 from .case import Attitude, Case, Environment, Instrument, Pings, Position, Reference, Truth, Water, format_utc, parse_utc
 from .scenario import Scenario
 
@@ -115,7 +115,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
     ypr = ypr + rng.normal(size=ypr.shape) * np.array([noise.heading_rad, noise.tilt_rad, noise.tilt_rad])
     ypr = quantise(ypr, noise.attitude_resolution_rad)
     attitude = Attitude(t_att, wrap_heading(ypr[:, 0]), ypr[:, 1], ypr[:, 2], frame=pf.mounting.attitude_frame)
-    heading_truth = heading_truth(effects, true_read, t_att)
+    heading_truth = effective_heading(effects, true_read, t_att)
 
     # Reference velocity of a body point (GNSS antenna, video marker).
     reference = None
