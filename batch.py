@@ -13,7 +13,6 @@ import logging
 import os
 import sys
 import time
-import warnings
 from dataclasses import dataclass
 
 from .estimators.calibration import CalibrationConfig
@@ -57,9 +56,7 @@ def _calibrate(job: CalibrateJob) -> dict:
     from .estimators.calibration import CalibrationProblem
 
     case, notes = _read_covered(job.case_path)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # warnings are written into the result
-        r = CalibrationProblem(case, job.config).solve()
+    r = CalibrationProblem(case, job.config).solve()  # its warnings are in the result
     r.warnings = notes + list(r.warnings)
     r.to_json(job.out_path)
     ms = r.multistart

@@ -381,8 +381,6 @@ def _print_calibration(result, title: str) -> None:
 
 
 def cmd_calibrate(args) -> int:
-    import warnings
-
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
     from .estimators.calibration import CalibrationProblem
@@ -406,9 +404,7 @@ def cmd_calibrate(args) -> int:
     if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
         cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
     title = f"{len(cases)} runs ({', '.join(c.name for c in cases)}), one NLP" if args.joint else cases[0].name
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # every warning is written into the result and printed below
-        result = CalibrationProblem(cases if args.joint else cases[0], config).solve()
+    result = CalibrationProblem(cases if args.joint else cases[0], config).solve()  # its warnings: result.warnings
     result.warnings = notes + list(result.warnings)  # the cases' own warnings first, in CALIB.json too
     result.to_json(args.out)
     _print_calibration(result, title)
@@ -426,7 +422,7 @@ def cmd_compare_formulations(args) -> int:
     rows = compare_formulations(case, _calibration_config(args))
     print(format_rows(rows))
     if args.out:
-        from .solvers.bench_common import write_json
+        from .benchmarks.common import write_json
 
         write_json(rows, Path(args.out))
     return 0
@@ -434,8 +430,6 @@ def cmd_compare_formulations(args) -> int:
 
 def cmd_demo(args) -> int:
     """The paper's pipeline on built-in cases: calibrate on pool_m0, correct pool_m1 and pool_m2."""
-    import warnings
-
     from .cases.corrected import write_correction
     from .cases.io import write_case
     from .cases.scenario import get_scenario
@@ -460,10 +454,8 @@ def cmd_demo(args) -> int:
     # 1. calibration run (the paper's Measurement 0)
     calib_case = cases[args.calibration_scenario]
     print(summarise(calib_case))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        calib = CalibrationProblem(calib_case, CalibrationConfig(formulation="exact", n_starts=args.starts,
-                                                                  seed=args.seed)).solve()
+    calib = CalibrationProblem(calib_case, CalibrationConfig(formulation="exact", n_starts=args.starts,
+                                                              seed=args.seed)).solve()
     calib.to_json(out / "calibration.json")
     ms = calib.multistart
     print(f"\njoint calibration ({calib.formulation}): {ms.message}, {ms.time_s:.2f} s solver time")
@@ -573,7 +565,7 @@ def _diagnose_selftest(args) -> int:
 
 def cmd_bench(args) -> int:
     from .cases.atomic import check_output_folder
-    from .solvers.bench import run
+    from .benchmarks.suites import run
 
     check_output_folder(args.out)
     run(args.suite, args.quick, Path(args.out))

@@ -1,4 +1,4 @@
-"""In-memory form of a case file (``../shared/case-format.md``, version 1).
+"""In-memory form of a case file (``docs/case-format.md``, version 1).
 
 One frozen dataclass per group of the file. Arrays are float64, SI units, NaN for
 missing values. Optional groups are ``None`` when absent; optional datasets inside a

@@ -1,4 +1,4 @@
-"""Read, validate and write case files (``../shared/case-format.md``, version 1).
+"""Read, validate and write case files (``docs/case-format.md``, version 1).
 
 Every problem with a file is reported as a :class:`CaseFormatError` whose message is
 one line: ``<file>: <HDF5 path>: expected ..., got ...``. Attributes are named as

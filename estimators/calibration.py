@@ -7,7 +7,7 @@ damped modes per axis, yaw trend; modes chosen by BIC in an attitude-only pre-fi
 sensor's samples, and the navigation velocity of G as a piecewise-linear curve; shared, the
 lever-arm block of the chosen formulation (:mod:`.formulations`), the installation angles
 (vessel-frame sensor; a sensor inside the head cannot see them,
-``../shared/notes-on-the-paper.md``) or the heading misalignment of a head sensor against a
+``docs/notes-on-the-paper.md``) or the heading misalignment of a head sensor against a
 moving reference (with the compass's one-cycle deviation where the headings span enough),
 and the bed velocity under the bottom track. The objective is half the sum of squared
 noise-weighted residuals of every channel the runs hold: attitude samples, bottom-track
@@ -24,7 +24,6 @@ are Newey-West sandwiches over time bins (:mod:`.hac`): residuals of real data a
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -537,8 +536,6 @@ class CalibrationProblem:
         declination, declination_note = self._declination()
         self._se_x = se_x
         runs = self._run_results(x, e, bed)
-        for msg in warn:
-            warnings.warn(msg, stacklevel=3)
         first = runs[0]
         p_att = self.fits[0].params if self.runs[0].attitude_source != "model" else \
             AttitudeParams.unpack(x[u.index("attitude0")], self.runs[0].fit.params.layout)

@@ -3,7 +3,7 @@
 Raw lever-arm coordinates are partly unobservable, so the primary figure is the one
 that matters for the correction: the per-beam tangential radial velocity
 (dLambda/dt r_i) . d_i that the estimated lever arms predict along the TRUE motion,
-against the truth's (``../shared/notes-on-the-paper.md``).
+against the truth's (``docs/notes-on-the-paper.md``).
 """
 
 from __future__ import annotations

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import warnings
 
 import numpy as np
 
@@ -26,9 +25,7 @@ def compare_formulations(case: Case, config: CalibrationConfig, formulations=FOR
     rows = {}
     for form in formulations:
         tic = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            r = CalibrationProblem(case, dataclasses.replace(config, formulation=form)).solve()
+        r = CalibrationProblem(case, dataclasses.replace(config, formulation=form)).solve()
         elapsed = time.perf_counter() - tic
         ms = r.multistart
         unobs = [u for u in r.uncertainty.unobservable if "attitude-model" not in u["description"]]

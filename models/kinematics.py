@@ -8,7 +8,7 @@ The paper's Eq. 31 writes the tangential velocity as Omega r with Omega an
 Earth-frame tensor and r a body-frame vector. The consistent form is
 dLambda/dt r = Omega Lambda r (the paper's own Eqs. 22/24); ``paper_literal``
 functions keep the printed form for comparison only
-(``../shared/notes-on-the-paper.md``, erratum 1).
+(``docs/notes-on-the-paper.md``, erratum 1).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Sensor models: attitude sampled at a low irregular rate, reference velocity.
 
 An attitude sensor aligned with the vessel reads the Euler angles of Lambda; one
-inside the ADCP head reads those of Lambda Lambda_tb (``../shared/notes-on-the-paper.md``
+inside the ADCP head reads those of Lambda Lambda_tb (``docs/notes-on-the-paper.md``
 erratum 5). A reference (GNSS antenna, video target) at body point p moves with
 V_a + dLambda/dt p (erratum 6).
 """

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from adcpdyn.solvers.bench import run
-from adcpdyn.solvers.bench_scale import growth_exponent
+from adcpdyn.benchmarks.suites import run
+from adcpdyn.benchmarks.scale import growth_exponent
 from adcpdyn.solvers.linear_solvers import probe_linear_solver
 
 TOL_EXPONENT = 1e-9

@@ -193,9 +193,9 @@ def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
     sc = get_scenario("deep_ship")  # pitch 0.35 deg, roll -0.25 deg: outside a 0.1-degree box
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0, water_depth_m=12.0))
     case = simulate(sc, seed=4)
-    with pytest.warns(UserWarning, match="held by the search box"):
-        r = CalibrationProblem(case, CalibrationConfig(formulation="minimal", n_starts=2, timing="shallow",
-                                                       installation_bound_rad=np.deg2rad(0.1))).solve()
+    r = CalibrationProblem(case, CalibrationConfig(formulation="minimal", n_starts=2, timing="shallow",
+                                                   installation_bound_rad=np.deg2rad(0.1))).solve()
+    assert any("held by the search box" in w for w in r.warnings)  # stored in the result, not raised
     assert np.isinf(r.installation_ypr_se_rad[1]) and not r.installation_determined
     assert r.to_dict()["installation_ypr_rad"][1] is None  # null in CALIB.json
 

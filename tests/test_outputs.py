@@ -99,7 +99,7 @@ def test_sigterm_during_a_command_removes_the_temporary(tmp_path):
 
 
 def test_out_in_a_missing_folder_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
-    import adcpdyn.models.simulator as simulator
+    import adcpdyn.cases.simulation as simulator
 
     def never(*a, **k):
         raise AssertionError("the work started before --out was checked")

@@ -12,7 +12,6 @@ block is one notebook cell.
 # %% Inputs
 import json
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -39,9 +38,7 @@ print(f"imported {source.name}: {case.pings.n} pings, {case.water.cell_depth_m.s
       f"{audit['/provenance']['coordinate_system_found']}, UTC origin {case.time_origin_utc}")
 
 # %% 2. Calibrate (two starts are enough for a look; `adcpdyn calibrate` uses 24)
-with warnings.catch_warnings():
-    warnings.simplefilter("ignore")  # the calibration's warnings are in its result
-    result = calibrate(case, CalibrationConfig(n_starts=2))
+result = calibrate(case, CalibrationConfig(n_starts=2))  # its warnings are in result.warnings
 calib_path = out / "CALIB.json"
 result.to_json(calib_path)
 calibration = json.loads(calib_path.read_text())

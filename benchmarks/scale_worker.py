@@ -1,6 +1,6 @@
 """One size of ``adcpdyn bench scale``, run in its own process so that its peak memory is its own.
 
-``python -m adcpdyn.solvers.scale_worker N_PINGS SEED`` prints one JSON line.
+``python -m adcpdyn.benchmarks.scale_worker N_PINGS SEED`` prints one JSON line.
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ def measure(n_pings: int, seed: int) -> dict:
     """Simulate, then calibrate (one start, one worker) and time each step; peak RSS in MB."""
     from ..estimators.evaluation import calibration_errors
     from ..cases.simulation import simulate
-    from .bench_common import timed_calibration
-    from .multistart import SolverOptions
+    from .common import timed_calibration
+    from ..solvers.multistart import SolverOptions
 
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     tic = time.perf_counter()

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import Target, machine, print_targets, save_figure
+from .common import Target, machine, print_targets, save_figure
 from .scale_worker import HESSIAN, PING_INTERVAL_S, SCENARIO
 
 LINEAR_TOLERANCE = 0.1  # exponent up to 1.1 counts as linear growth (timing noise)
@@ -38,7 +38,7 @@ def bench_scale(sizes, seed: int = 1, time_limit_s: float = 600.0, memory_limit_
                 skipped.append({"n_pings": n, "reason": f"predicted {t_pred:.0f} s and {m_pred:.0f} MB from the sizes "
                                 f"measured (limits {time_limit_s:.0f} s, {memory_limit_mb:.0f} MB)"})
                 continue
-        cmd = [sys.executable, "-m", "adcpdyn.solvers.scale_worker", str(n), str(seed)]
+        cmd = [sys.executable, "-m", "adcpdyn.benchmarks.scale_worker", str(n), str(seed)]
         try:
             out = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit_s)
         except subprocess.TimeoutExpired:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import Target, machine, print_targets, save_figure
+from .common import Target, machine, print_targets, save_figure
 
 SCENARIOS = ("pool_m0", "pool_diag")
 KEYS = ("tangential_radial_rms_m_s", "lever_arm_rms_error_m", "max_constraint_violation", "iterations_mean",

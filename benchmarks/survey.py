@@ -20,12 +20,11 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
 
-from .bench_common import Target, machine, print_targets, save_figure
+from .common import Target, machine, print_targets, save_figure
 
 FAST_PINGS_S = (0.30, 0.45)  # ping interval giving ~400 pings per 150-s transect
 BT_AR1, REFERENCE_AR1 = 0.7, 0.5
@@ -56,14 +55,12 @@ def _truth(cases) -> dict:
 def _solve(cases, starts: int, seed: int = 0):
     from ..estimators.calibration import CalibrationConfig, CalibrationProblem
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tic = time.perf_counter()
-        problem = CalibrationProblem(cases if len(cases) > 1 else cases[0], CalibrationConfig(n_starts=starts, seed=seed))
-        setup = time.perf_counter() - tic
-        tic = time.perf_counter()
-        r = problem.solve()
-        return r, setup, time.perf_counter() - tic
+    tic = time.perf_counter()
+    problem = CalibrationProblem(cases if len(cases) > 1 else cases[0], CalibrationConfig(n_starts=starts, seed=seed))
+    setup = time.perf_counter() - tic
+    tic = time.perf_counter()
+    r = problem.solve()
+    return r, setup, time.perf_counter() - tic
 
 
 def _scores(r, truth: dict, run_index=None) -> dict:
@@ -138,7 +135,7 @@ def _covered(rows, se_key: str, bed_se_key: str) -> float:
 
 
 def print_survey(res: dict) -> None:
-    from .bench_scale import growth_exponent
+    from .scale import growth_exponent
 
     rows = res["scale"]
     print(f"survey benchmark: river_survey transects of ~400 pings, {res['starts']} starts; times from one run on a "

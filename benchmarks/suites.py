@@ -8,14 +8,13 @@ machine, versions and seeds.
 from __future__ import annotations
 
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..models.rotations import course_difference_rad
-from .bench_common import machine as _machine
-from .bench_common import save_figure, write_json
+from .common import machine as _machine
+from .common import save_figure, write_json
 
 SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey")
 
@@ -23,11 +22,9 @@ SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "surv
 def _calibrate(case, **kw):
     from ..estimators.calibration import CalibrationConfig, CalibrationProblem
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tic = time.perf_counter()
-        r = CalibrationProblem(case, CalibrationConfig(**kw)).solve()
-        return r, time.perf_counter() - tic
+    tic = time.perf_counter()
+    r = CalibrationProblem(case, CalibrationConfig(**kw)).solve()
+    return r, time.perf_counter() - tic
 
 
 def bench_calibration(seeds: int = 20, starts: int = 8, deep_seeds: int = 2) -> dict:
@@ -176,7 +173,7 @@ def bench_correction(sizes) -> dict:
     from ..estimators.attitude_fit import fit_attitude
     from ..models.rotations import euler_matrix
     from ..cases.simulation import simulate
-    from .rootfinder import RootfinderOptions
+    from ..solvers.rootfinder import RootfinderOptions
 
     base = simulate(get_scenario("pool_m1"), seed=1)
     attitude = fit_attitude(base).params
@@ -295,20 +292,20 @@ def _suite(suite: str, quick: bool):
         res = bench_correction([10**3, 10**4, 10**5] if quick else [10**3, 10**4, 10**5, 10**6])
         return res, print_correction, figure_correction
     if suite == "formulations":
-        from .bench_formulations import bench_formulations, figure_formulations, print_formulations
+        from .formulations import bench_formulations, figure_formulations, print_formulations
 
         return bench_formulations(seeds=1 if quick else 5, starts=8), print_formulations, figure_formulations
     if suite == "solvers":
-        from .bench_solvers import bench_solvers, figure_solvers, print_solvers
+        from .solvers import bench_solvers, figure_solvers, print_solvers
 
         return bench_solvers(starts=8, jit=not quick), print_solvers, figure_solvers
     if suite == "survey":
-        from .bench_survey import bench_survey, figure_survey, print_survey
+        from .survey import bench_survey, figure_survey, print_survey
 
         res = bench_survey([1, 2, 4] if quick else [1, 2, 3, 4, 5, 6], surveys=2 if quick else 10,
                            coverage_seeds=10 if quick else 40)
         return res, print_survey, figure_survey
-    from .bench_scale import bench_scale, figure_scale, print_scale
+    from .scale import bench_scale, figure_scale, print_scale
 
     sizes = [100, 300, 1000, 3000, 10**4] if quick else [100, 300, 1000, 3000, 10**4, 3 * 10**4, 10**5]
     return bench_scale(sizes, time_limit_s=120.0 if quick else 900.0), print_scale, figure_scale

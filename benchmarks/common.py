@@ -6,7 +6,6 @@ import json
 import os
 import platform
 import time
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,14 +43,12 @@ def timed_calibration(case, fit=None, **config):
     """(result, setup seconds, solve seconds) of one calibration, warnings silenced."""
     from ..estimators.calibration import CalibrationConfig, CalibrationProblem
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        tic = time.perf_counter()
-        problem = CalibrationProblem(case, CalibrationConfig(**config), fit=fit)
-        setup = time.perf_counter() - tic
-        tic = time.perf_counter()
-        result = problem.solve()
-        return result, setup, time.perf_counter() - tic
+    tic = time.perf_counter()
+    problem = CalibrationProblem(case, CalibrationConfig(**config), fit=fit)
+    setup = time.perf_counter() - tic
+    tic = time.perf_counter()
+    result = problem.solve()
+    return result, setup, time.perf_counter() - tic
 
 
 def write_json(res: dict, path: Path) -> None:

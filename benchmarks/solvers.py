@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bench_common import Target, machine, print_targets, save_figure, timed_calibration
-from .multistart import SolverOptions
+from .common import Target, machine, print_targets, save_figure, timed_calibration
+from ..solvers.multistart import SolverOptions
 
 
 def variants(linear: dict, compiler: bool) -> dict:
@@ -67,7 +67,7 @@ def _child(starts: int, seed: int, options: str) -> None:
 def _row_in_child(starts, seed, opts: SolverOptions, time_limit_s: float) -> dict | None:
     """The variant's row from a child process, or None when it fails or outlasts the limit
     (the child's whole process group, compiler included, is then killed)."""
-    code = f"from adcpdyn.solvers.bench_solvers import _child; _child({starts}, {seed}, {json.dumps(json.dumps(dataclasses.asdict(opts)))})"
+    code = f"from adcpdyn.benchmarks.solvers import _child; _child({starts}, {seed}, {json.dumps(json.dumps(dataclasses.asdict(opts)))})"
     with tempfile.TemporaryDirectory(prefix="adcpdyn_jit_") as cwd:  # the C source and objects land here
         proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 cwd=cwd, start_new_session=True)
@@ -85,7 +85,7 @@ def bench_solvers(starts: int, seed: int = 1, jit: bool = True, jit_time_limit_s
     from ..cases.scenario import get_scenario
     from ..estimators.attitude_fit import fit_attitude
     from ..cases.simulation import simulate
-    from .linear_solvers import available_linear_solvers
+    from ..solvers.linear_solvers import available_linear_solvers
 
     case = simulate(get_scenario("pool_m0"), seed=seed)
     fit = fit_attitude(case, max_modes=3)
