@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import os
+from pathlib import Path
 
 import pytest
 
@@ -62,3 +64,30 @@ def shortened(case, seconds):
                                                else t.water_velocity_m_s[k])
     assert np.any(k)
     return case.replace(**changes)
+
+
+REAL = Path(os.environ.get("ADCPDYN_REAL_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"))
+
+
+def real(name: str) -> Path:
+    """A shared real instrument file, or a skip where it (or the reader) is absent."""
+    path = REAL / name
+    if not path.is_file():
+        pytest.skip(f"{path} absent")
+    pytest.importorskip("mhkit")
+    return path
+
+
+@pytest.fixture(scope="module")
+def imported():
+    """import_file of a real file by name, once per test module."""
+    from adcpdyn.cases.importers import import_file
+
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = import_file(real(name))
+        return cache[name]
+
+    return get

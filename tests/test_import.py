@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+from conftest import REAL, real
 
 from adcpdyn.cases.importers import ImportFailure, Window, detect_vendor, import_file, write_imported
 from adcpdyn.cases.importers.rdi_frames import SWAP, beam_to_earth, rdi_matrix, to_beam
@@ -15,32 +14,11 @@ from adcpdyn.cases.io import read_case
 from adcpdyn.estimators.asc import asc
 from adcpdyn.models.rotations import euler_matrix
 
-REAL = Path(os.environ.get("ADCPDYN_REAL_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"))
 EARTH_BT_TOL = 1e-6  # m/s: ASC Earth-frame BT against the instrument's own
 SPEED_RATIO_TOL = 0.05  # BT speed / GNSS speed within 5 %
 FRAME_TOL = 1e-12
 
 needs_reader = pytest.mark.skipif(not REAL.is_dir(), reason=f"real data folder {REAL} absent")
-
-
-def real(name: str) -> Path:
-    path = REAL / name
-    if not path.is_file():
-        pytest.skip(f"{path} absent")
-    pytest.importorskip("mhkit")
-    return path
-
-
-@pytest.fixture(scope="module")
-def imported():
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            cache[name] = import_file(real(name))
-        return cache[name]
-
-    return get
 
 
 # ---------------------------------------------------------------- frames (no data needed)

@@ -7,26 +7,15 @@ import datetime as dt
 import h5py
 import numpy as np
 import pytest
-from test_import import needs_reader, real
+from conftest import real
+from test_import import needs_reader
 
 from adcpdyn.cases.case import parse_utc
-from adcpdyn.cases.importers import import_file, write_imported
+from adcpdyn.cases.importers import write_imported
 from adcpdyn.cases.io import read_case
 from adcpdyn.cases.site import case_declination
 
 DECLINATION_TOL_DEG = 0.1
-
-
-@pytest.fixture(scope="module")
-def imported():
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            cache[name] = import_file(real(name))
-        return cache[name]
-
-    return get
 
 
 # Sites and dates from PROVENANCE.md; figures a colleague computed independently for these files.

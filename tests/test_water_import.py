@@ -4,12 +4,11 @@ bottom track, to 1e-6 m/s."""
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+from conftest import real
 from dolfyn_reference import dolfyn_earth
 
 from adcpdyn.cases.importers import Window, import_file, write_imported
@@ -17,32 +16,11 @@ from adcpdyn.cases.io import read_case
 from adcpdyn.estimators.asc import asc, earth_rotation
 from adcpdyn.estimators.water import static_relative_water
 
-REAL = Path(os.environ.get("ADCPDYN_REAL_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real"))
 EARTH_WATER_TOL = 1e-6  # m/s
 FLOAT32_EPS = float(np.finfo(np.float32).eps)
 
 FILES = [("RiverPro_test01.PD0", "beam"), ("winriver01.PD0", "ship"), ("winriver02_transect.PD0", "ship"),
          ("RDI_withBT.000", "earth"), ("vmdas02_os.ENR", "beam")]
-
-
-def real(name: str) -> Path:
-    path = REAL / name
-    if not path.is_file():
-        pytest.skip(f"{path} absent")
-    pytest.importorskip("mhkit")
-    return path
-
-
-@pytest.fixture(scope="module")
-def imported():
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            cache[name] = import_file(real(name))
-        return cache[name]
-
-    return get
 
 
 def _dolfyn(name, case, float64=True):
