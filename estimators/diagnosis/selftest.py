@@ -111,7 +111,8 @@ def run_one(label: str, params: dict, sim_seed: int, platform: str, config: Diag
     first = r.selected[0] if r.selected else NONE
     reported = next((s for s in r.ranking if s["effect"] == label and s.get("round", 1) == 1), None)
     oracle = None if absorbed else oracle_shrink(r, label, params, config)
-    return {"truth": label, "expected": expected, "absorbed_by_base": r.base["skipped_effects"].get(label) if absorbed else None,
+    visible = bool(r.gap_before > config.min_gap and r.gap_z_before > config.gap_z)  # the base shows a gap to explain
+    return {"truth": label, "expected": expected, "visible": visible, "absorbed_by_base": r.base["skipped_effects"].get(label) if absorbed else None,
             "params": params, "seed": sim_seed, "platform": platform, "slow_attitude": slow_attitude, "ar1": ar1,
             "attitude_source": r.base["attitude_source"], "verdict": r.verdict, "correct": first == expected,
             "gap_before": r.gap_before, "gap_after": r.gap_after,
@@ -138,6 +139,9 @@ def summarise(rows: list[dict], labels: list[str]) -> dict:
         "top1_accuracy": float(np.mean([r["correct"] for r in rows])) if rows else float("nan"),
         "top1_accuracy_with_effect": float(np.mean([r["correct"] for r in with_effect_rows])) if with_effect_rows else float("nan"),
         "false_alarm_rate": float(np.mean([r["verdict"] != NONE for r in none_rows])) if none_rows else float("nan"),
+        "top1_accuracy_visible": (lambda v: float(np.mean([r["correct"] for r in v])) if v else float("nan"))(
+            [r for r in rows if r["expected"] == NONE or r.get("visible", True)]),
+        "n_invisible": int(sum(r["expected"] != NONE and not r.get("visible", True) for r in rows)),
         "by_platform": {p: {"n": len(g), "top1": float(np.mean([r["correct"] for r in g]))}
                         for p in sorted({r.get("platform", "") for r in rows})
                         for g in [[r for r in rows if r.get("platform", "") == p]]},
@@ -161,7 +165,9 @@ def format_summary(s: dict) -> str:
              " " * w + " ".join(f"{short[c]:>8s}" for c in cols)]
     for t in names:
         lines.append(f"{t:<{w}s}" + " ".join(f"{s['confusion'][t][c]:8d}" for c in cols))
-    lines += [f"cases: {s['n_cases']}  top-1 accuracy: {100 * s['top1_accuracy']:.1f}% (target >= 90%)",
+    lines += [f"cases: {s['n_cases']}  top-1 accuracy: {100 * s['top1_accuracy']:.1f}% (target >= 90%); "
+              f"{100 * s['top1_accuracy_visible']:.1f}% leaving out the {s['n_invisible']} injected effects that left no "
+              "significant gap (held-out excess <= min_gap or z <= gap_z: no method can name them from these data)",
               "by platform: " + ", ".join(f"{p} {100 * v['top1']:.0f}% of {v['n']}" for p, v in s.get("by_platform", {}).items()),
               f"false alarms on {s['n_effect_free']} effect-free cases: {100 * s['false_alarm_rate']:.1f}% (target <= 10%)",
               f"every report says where the gap lies: {s['every_case_says_where']}",
