@@ -43,7 +43,7 @@ def _save(fig, path) -> None:
 def panel_letters(axes) -> None:
     """Letter the panels (a), (b), ... in reading order, at their top left."""
     for k, ax in enumerate(np.ravel(axes)):
-        ax.text(-0.02, 1.02, f"({chr(ord('a') + k)})", transform=ax.transAxes, ha="right", va="bottom",
+        ax.text(0.0, 1.02, f"({chr(ord('a') + k)})", transform=ax.transAxes, ha="left", va="bottom",
                 fontweight="bold")
 
 
