@@ -206,3 +206,25 @@ def test_import_file_takes_the_dolfyn_dataset_too():
     assert from_ds.audit["/water"]["cell_size_changes"].startswith("unknown")
     with pytest.raises(ValueError, match=r"^source: expected an instrument file path or a dolfyn xarray.Dataset"):
         adcpdyn.import_file(object())
+
+
+def test_a_correction_of_a_case_the_coverage_step_cut_exports(tmp_path):
+    """Pings outside the attitude record are left out by correct; export (command and API) leaves them out too
+    (it refused: 'expected the case's 57 ping times, got 50')."""
+    import dataclasses
+
+    case = adcpdyn.simulate("pool_m1", seed=1)
+    a = case.attitude
+    k = a.time_s <= case.pings.time_s[-1] - 5.0
+    case = case.replace(attitude=dataclasses.replace(a, time_s=a.time_s[k], heading_rad=a.heading_rad[k],
+                                                     pitch_rad=a.pitch_rad[k], roll_rad=a.roll_rad[k]))
+    path = tmp_path / "cut.h5"
+    from adcpdyn.cases.io import write_case
+    from adcpdyn.cli import main
+
+    write_case(case, path)
+    corrected = adcpdyn.correct(path, "asc", out=tmp_path / "cut_asc.h5")
+    assert 0 < corrected.time_s.size < case.pings.n and "left out" in corrected.attrs["warnings"][-1]
+    assert main(["export", str(tmp_path / "cut_asc.h5"), "--out", str(tmp_path / "cut.nc")]) == 0
+    ds = adcpdyn.to_xarray(path, corrected)
+    assert ds.sizes["time"] == corrected.time_s.size
