@@ -43,8 +43,8 @@ def _save(fig, path) -> None:
 def panel_letters(axes) -> None:
     """Letter the panels (a), (b), ... in reading order, at their top left."""
     for k, ax in enumerate(np.ravel(axes)):
-        ax.text(0.0, 1.02, f"({chr(ord('a') + k)})", transform=ax.transAxes, ha="left", va="bottom",
-                fontweight="bold")
+        text = getattr(ax, "text2D", ax.text)  # a 3-D panel places text in its 2-D projection
+        text(0.0, 1.02, f"({chr(ord('a') + k)})", transform=ax.transAxes, ha="left", va="bottom", fontweight="bold")
 
 
 def course_deg(v) -> np.ndarray:

@@ -170,6 +170,16 @@ def test_attitude_panels_are_roll_pitch_yaw_lettered(monkeypatch):
     assert [tx.get_text() for ax in fig.axes for tx in ax.texts] == ["(a)", "(b)", "(c)"]
 
 
+def test_radius_vector_panels_are_lettered_and_say_truth_only_with_one(monkeypatch):
+    plots, figs = _captured(monkeypatch)
+    r = np.array([[0.1, 0.2, 0.3]] * 4)
+    for truth in (r, None):
+        plots.radius_vectors_figure(r, np.full((4, 3), 0.01), truth, "head", "r.svg")
+        fig, _ = figs[-1]
+        assert [tx.get_text() for ax in fig.axes for tx in ax.texts] == ["(a)", "(b)"]
+        assert ("truth" in fig.axes[1].get_title()) == (truth is not None)
+
+
 def test_compare_on_a_measured_reference_never_says_truth(tmp_path, monkeypatch):
     """A case with a reference velocity and no truth is compared against the reference, labelled GNSS."""
     from adcpdyn import plots

@@ -186,3 +186,12 @@ def test_compare_format_option(calibrated, tmp_path, fmt, magic, capsys):
     figure = tmp_path / f"pool_m1_compare.{fmt}"
     assert magic in figure.read_bytes()[:400]
     assert "against simulated truth" in capsys.readouterr().out
+
+
+def test_demo_writes_its_figures_in_the_format_asked(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--starts", "1", "--scenario", "pool_m1", "--format", "svg", "--out", str(out)]) == 0
+    for name in ("attitude_fit", "radius_vectors", "pool_m1_velocity"):
+        assert b"<svg" in (out / f"{name}.svg").read_bytes()[:2000], name
+    assert not list(out.glob("*.png"))
+    assert "radius_vectors.svg" in capsys.readouterr().out
