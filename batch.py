@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 from .estimators.calibration import CalibrationConfig
 
-LOCAL, SERIAL = "local", "none"
+LOCAL, SERIAL, AUTO = "local", "none", "auto"
+IN_PROCESS_MAX_JOBS = 2  # auto: a LocalCluster costs seconds to start; one or two cases run here
 
 
 @dataclass(frozen=True)
@@ -41,25 +42,13 @@ class CorrectJob:
     reference: str = "bt"  # water velocities referenced to the bottom track or the GNSS
 
 
-def _read_covered(path: str):
-    """The case restricted to what its attitude record covers, and its warnings (as the one-case verbs)."""
-    from .cases.coverage import restrict_to_coverage
-    from .cases.io import case_warnings, read_case
-
-    case = read_case(path)
-    notes = case_warnings(case)
-    case, note = restrict_to_coverage(case, source=path)
-    return case, notes + ([note] if note else [])
-
-
 def _calibrate(job: CalibrateJob) -> dict:
-    from .estimators.calibration import CalibrationProblem
+    from .api import calibrate
 
-    case, notes = _read_covered(job.case_path)
-    r = CalibrationProblem(case, job.config).solve()  # its warnings are in the result
-    r.warnings = notes + list(r.warnings)
+    r = calibrate(job.case_path, job.config)  # the case's own warnings first in r.warnings
     r.to_json(job.out_path)
     ms = r.multistart
+    notes = [w for c in r.provenance.get("cases", []) for w in c.get("warnings", [])]
     return {"success": r.success, "objective": r.objective, "max_constraint_violation": r.max_constraint_violation,
             "fraction_at_best": ms.fraction_at_best, "iterations": ms.iterations,
             "lever_arms_sensor_m": r.lever_arms_sensor_m.tolist(), "installation_ypr_rad": r.installation_ypr_rad.tolist(),
@@ -69,17 +58,12 @@ def _calibrate(job: CalibrateJob) -> dict:
 def _correct(job: CorrectJob) -> dict:
     import numpy as np
 
+    from .api import correct
     from .cases.corrected import write_correction
-    from .estimators.calibration_file import read_calibration
-    from .estimators.correct_case import as_calibrated_run, correct_case
 
-    calibration = None if job.calibration_path is None else read_calibration(job.calibration_path)
-    case, notes = _read_covered(job.case_path)
-    case = as_calibrated_run(case, job.case_path, calibration)
-    result = correct_case(case, job.method, calibration, job.timing, job.reference)
-    if notes:
-        result.attrs["warnings"] = notes
-    write_correction(result, job.out_path, source_case=job.case_path)
+    result = correct(job.case_path, job.method, job.calibration_path, timing=job.timing, reference=job.reference)
+    write_correction(result, job.out_path, source_case=job.case_path)  # the folder is made by the first write
+    notes = result.attrs.get("warnings", [])
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
     return {"success": True, "method": result.method, "pings": len(v),
@@ -102,14 +86,24 @@ def run_job(job) -> dict:
 
 
 def check_scheduler(scheduler: str) -> str:
-    """``local``, ``none`` or a scheduler address (``tcp://host:port`` or ``host:port``)."""
-    if scheduler in (LOCAL, SERIAL):
+    """``auto``, ``local``, ``none`` or a scheduler address (``tcp://host:port`` or ``host:port``)."""
+    if scheduler in (AUTO, LOCAL, SERIAL):
         return scheduler
     address = scheduler.split("://", 1)[-1]
     host, _, port = address.rpartition(":")
     if not host or not port.isdigit():
-        raise ValueError(f"--scheduler: expected {LOCAL!r}, {SERIAL!r} or an address like tcp://127.0.0.1:8786, "
-                         f"got {scheduler!r}")
+        raise ValueError(f"--scheduler: expected {AUTO!r}, {LOCAL!r}, {SERIAL!r} or an address like "
+                         f"tcp://127.0.0.1:8786, got {scheduler!r}")
+    return scheduler
+
+
+def resolve_scheduler(scheduler: str, n_jobs: int) -> str:
+    """What ``auto`` means for ``n_jobs``: in this process (``none``) for at most
+    :data:`IN_PROCESS_MAX_JOBS`, where starting a LocalCluster costs more than it saves, else
+    ``local``; any other choice as given (an address is always used)."""
+    scheduler = check_scheduler(scheduler)
+    if scheduler == AUTO:
+        return SERIAL if n_jobs <= IN_PROCESS_MAX_JOBS else LOCAL
     return scheduler
 
 
@@ -119,13 +113,14 @@ def _bar(total: int, progress: bool | None):
     return tqdm(total=total, unit="case", desc="cases", disable=not (sys.stderr.isatty() if progress is None else progress))
 
 
-def run_batch(jobs, scheduler: str = LOCAL, n_workers: int | None = None, progress: bool | None = None) -> list[dict]:
+def run_batch(jobs, scheduler: str = AUTO, n_workers: int | None = None, progress: bool | None = None) -> list[dict]:
     """Every job's summary, in job order.
 
     Parameters
     ----------
     jobs : list of CalibrateJob or CorrectJob
     scheduler : str
+        ``auto`` (``none`` for one or two jobs, else ``local``: :func:`resolve_scheduler`),
         ``local`` (a LocalCluster of single-threaded worker processes: CasADi's symbolic
         graphs are not safe to build from several threads of one process), ``none``
         (serial, in this process) or the address of a running Dask scheduler.
@@ -135,7 +130,7 @@ def run_batch(jobs, scheduler: str = LOCAL, n_workers: int | None = None, progre
         Progress bar on stderr (default: when stderr is a terminal).
     """
     jobs = list(jobs)
-    scheduler = check_scheduler(scheduler)
+    scheduler = resolve_scheduler(scheduler, len(jobs))
     if not jobs:
         return []
     if scheduler == SERIAL:

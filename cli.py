@@ -1,4 +1,5 @@
-"""Command line: ``adcpdyn simulate | import | info | correct | export | calibrate | compare | scenarios | demo``."""
+"""adcpdyn: attitude dynamic correction for vessel-mounted Janus ADCPs (simulate, import, calibrate, correct,
+compare, diagnose, export). Every command is also a Python function: ``import adcpdyn`` (docs/api.md)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,64 @@ import numpy as np
 
 DEFAULT_CASES = ("pool_m1", "pool_m2")
 TIMINGS = ("deep", "shallow", "exact")  # correct --timing
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+EXIT_STATUS = """exit status:
+  0    success
+  1    a solve failed or did not converge (calibrate, diagnose; a batch with a case not
+       converged); the output is still written and says so
+  2    bad input: an unreadable or invalid file, an impossible value or option; one line on
+       stderr names the field (a batch: some case failed, the others are written)
+  130  interrupted (Ctrl-C: 128 + SIGINT); no partial file is left
+  143  terminated (128 + SIGTERM); no partial file is left
+"""
+
+# ---------------------------------------------------------------------------------- progress on stderr
+_LIVE_FD: int | None = None  # the real stderr while descriptor 2 is held (see _HeldStderr)
+
+
+def progress_enabled() -> bool:
+    """Progress lines on stderr: when it is a terminal, or as ``ADCPDYN_PROGRESS=1|0`` says (stdout stays clean)."""
+    env = os.environ.get("ADCPDYN_PROGRESS", "").strip()
+    if env in ("0", "1"):
+        return env == "1"
+    try:
+        return os.isatty(_LIVE_FD if _LIVE_FD is not None else 2)
+    except OSError:
+        return False
+
+
+class _Progress:
+    """One stderr line per step, with the seconds since the command started: ``adcpdyn VERB: [  12.3 s] TEXT``."""
+
+    def __init__(self, verb: str):
+        self.verb, self.t0, self.on = verb, time.perf_counter(), progress_enabled()
+
+    def __call__(self, text: str) -> None:
+        if not self.on:
+            return
+        line = f"adcpdyn {self.verb}: [{time.perf_counter() - self.t0:7.1f} s] {text}\n".encode("utf-8", "replace")
+        with contextlib.suppress(Exception):
+            sys.stderr.flush()
+        with contextlib.suppress(OSError):
+            os.write(_LIVE_FD if _LIVE_FD is not None else 2, line)
+
+
+class _DiagnosisProgress(_Progress):
+    """The diagnosis's labels (``effect`` in round 1, ``chosen+effect`` later) as round, effect and time."""
+
+    def __init__(self, verb: str, n_runs: int):
+        super().__init__(verb)
+        self.fitted = 0
+        self(f"fitting the base model ({n_runs} run{'s' if n_runs > 1 else ''}) and its held-out residuals")
+
+    def fitted_model(self, label: str) -> None:
+        if self.fitted == 0:
+            self("base model fitted; trying the catalog's effects")
+        self.fitted += 1
+        parts = label.split("+")
+        on_top = f" on top of {'+'.join(parts[:-1])}" if len(parts) > 1 else ""
+        self(f"round {len(parts)}: fitted {parts[-1]}{on_top} (model {self.fitted})")
 
 
 def _read(path):
@@ -151,7 +210,6 @@ def _prepare(path, say: bool = True):
 
 
 from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
-from .estimators.correct_case import as_calibrated_run  # noqa: E402
 from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
@@ -174,11 +232,12 @@ def _batch_out(args) -> Path:
 
 def _run_batch(args, jobs, columns) -> int:
     """Run jobs (serial or Dask), print one row per case, write ``summary.json`` in --out."""
-    from .batch import run_batch, write_summary
+    from .batch import resolve_scheduler, run_batch, write_summary
 
     out = Path(args.out)
     tic = time.perf_counter()
-    rows = run_batch(jobs, scheduler=args.scheduler, n_workers=args.workers)
+    scheduler = resolve_scheduler(args.scheduler, len(jobs))
+    rows = run_batch(jobs, scheduler=scheduler, n_workers=args.workers)
     wall = time.perf_counter() - tic
     name_w = max(len(Path(r["case"]).stem) for r in rows) + 2
     print(f"{'case':<{name_w}}{'status':<10}" + "".join(f"{label:>{w}}" for label, _, w, _ in columns) + f"{'time s':>8}")
@@ -193,17 +252,18 @@ def _run_batch(args, jobs, columns) -> int:
     write_summary(rows, out / "summary.json")
     n_err = sum(bool(r["error"]) for r in rows)
     n_fail = sum(not r["error"] and not r["success"] for r in rows)
-    print(f"{len(rows)} cases on scheduler {args.scheduler!r} in {wall:.1f} s: {len(rows) - n_err - n_fail} ok, "
+    where = f"{scheduler!r}" + (" (auto: in this process for 1-2 cases)" if args.scheduler == "auto" and scheduler == "none"
+                                else " (auto)" if args.scheduler == "auto" else "")
+    print(f"{len(rows)} cases on scheduler {where} in {wall:.1f} s: {len(rows) - n_err - n_fail} ok, "
           f"{n_fail} not converged, {n_err} errors; wrote {out}/ (one output per case) and {out / 'summary.json'}")
     return 2 if n_err else (1 if n_fail else 0)
 
 
 def cmd_correct(args) -> int:
+    from .api import correct
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
 
-    if args.timing not in TIMINGS:
-        raise ValueError(f"--timing: expected one of {list(TIMINGS)}, got {args.timing!r}")
     if is_many(args.case):
         from .batch import CorrectJob, check_scheduler
 
@@ -219,13 +279,12 @@ def cmd_correct(args) -> int:
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
     check_output_file(args.out, args.case, args.calibration)
-    calibration = _load_calibration(args.calibration)
-    case, notes = _prepare(args.case)
-    case = as_calibrated_run(case, args.case, calibration)
-    result = _correct(case, args.method, calibration, args.timing, args.reference)
-    if notes:
-        result.attrs["warnings"] = notes
-    _write_corrected(result, case, args)
+    command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
+               + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
+    result = correct(args.case, args.method, args.calibration, timing=args.timing, reference=args.reference,
+                     out=args.out, history=command)
+    for w in result.attrs.get("warnings", []):
+        print(f"warning: {w}")
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
@@ -239,25 +298,6 @@ def cmd_correct(args) -> int:
         if result.attrs.get(key):
             print(f"{'note' if key == 'moving_bed_note' else 'warning'}: {result.attrs[key]}")
     return 0
-
-
-def _write_corrected(result, case, args) -> None:
-    """``--out``: the corrected HDF5 file, or CF netCDF (case and correction) when it ends in ``.nc``."""
-    from .cases.corrected import write_correction
-
-    if args.calibration:
-        from .cases.hashing import sha256_of
-
-        result.attrs.update(calibration_file=str(args.calibration), calibration_sha256=sha256_of(args.calibration))
-    if Path(args.out).suffix.lower() != ".nc":
-        write_correction(result, args.out, source_case=str(args.case))
-        return
-    from .cases.netcdf import read_provenance, to_xarray, write_netcdf
-
-    command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
-               + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
-    ds = to_xarray(case, result, provenance=read_provenance(args.case), source_case_path=args.case, history=command)
-    write_netcdf(ds, args.out, args.case, args.calibration)
 
 
 def cmd_export(args) -> int:
@@ -279,47 +319,20 @@ def cmd_export(args) -> int:
 
 def cmd_compare(args) -> int:
     """Every correction method on one case: the paper's metrics table and figures."""
-    from .estimators.metrics import format_table, velocity_metrics
+    from .api import compare
     from .cases.atomic import check_output_folder
-    from .cases.coverage import reference_at
-    from .plots import velocity_figure
 
     if args.out:
         check_output_folder(args.out)
-    calibration = _load_calibration(args.calibration)
-    case, notes = _prepare(args.case)
-    case = as_calibrated_run(case, args.case, calibration)
-    methods = [m for m in CORRECTION_METHODS if m != "oracle" or case.truth is not None]
-    if calibration is None:
-        methods = [m for m in methods if m in ("asc", "oracle")]
-    results, not_run = {}, {}
-    for m in methods:  # a method this calibration cannot drive is reported, not fatal to the others
-        try:
-            results[m] = _correct(case, m, calibration)
-        except ValueError as err:
-            not_run[m] = str(err)
-    if case.truth is not None:
-        reference, label = case.truth.vessel_velocity_m_s, "truth"
-    elif case.reference is not None and case.reference.velocity_m_s is not None:
-        reference, label = reference_at(case, case.pings.time_s), "reference"
-    else:
-        raise ValueError(f"{args.case}: /truth or /reference: needed to compare methods against something")
-    table = {m: velocity_metrics(r.time_s, r.vessel_velocity_m_s, reference) for m, r in results.items()}
-    table[label] = velocity_metrics(case.pings.time_s, reference, reference)
-    print(f"{case.name}: vessel velocity against {label}")
-    print(format_table(table))
-    for m, why in not_run.items():
+    comparison = compare(args.case, args.calibration, out=args.out, fmt=args.format)
+    for w in comparison.warnings:
+        print(f"warning: {w}")
+    print(f"{comparison.case}: vessel velocity against {comparison.against_text}")
+    print(comparison.format_table())
+    for m, why in comparison.not_run.items():
         print(f"{m}: not run: {why}")
-    if args.out:
-        from .cases.atomic import atomic_path
-        from .estimators.calibration import _jsonable
-
-        out = Path(args.out)
-        with atomic_path(out / f"{case.name}_compare.json") as tmp, open(tmp, "w") as fh:
-            json.dump(_jsonable({**table, "not_run": not_run, "warnings": notes}), fh, indent=2)
-        velocity_figure(case.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, reference,
-                        f"{case.name}: corrections against {label}", out / f"{case.name}_compare.png")
-        print(f"saved {out / (case.name + '_compare.png')}, {out / (case.name + '_compare.json')}")
+    if comparison.files:
+        print("saved " + ", ".join(str(f) for f in reversed(comparison.files)))
     return 0
 
 
@@ -381,9 +394,9 @@ def _print_calibration(result, title: str) -> None:
 
 
 def cmd_calibrate(args) -> int:
+    from .api import calibrate
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
-    from .estimators.calibration import CalibrationProblem
 
     if is_many(args.case) and not args.joint:
         from .batch import CalibrateJob, check_scheduler
@@ -398,14 +411,9 @@ def cmd_calibrate(args) -> int:
     paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
     check_output_file(args.out, *paths)
     config = _calibration_config(args)
-    prepared = [_prepare(p, say=False) for p in paths]
-    cases = [c for c, _ in prepared]
-    notes = [n for _, ns in prepared for n in ns]
-    if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
-        cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
-    title = f"{len(cases)} runs ({', '.join(c.name for c in cases)}), one NLP" if args.joint else cases[0].name
-    result = CalibrationProblem(cases if args.joint else cases[0], config).solve()  # its warnings: result.warnings
-    result.warnings = notes + list(result.warnings)  # the cases' own warnings first, in CALIB.json too
+    result = calibrate(paths if args.joint else paths[0], config, progress=_Progress("calibrate"))
+    names = [c["name"] for c in result.provenance["cases"]]
+    title = f"{len(names)} runs ({', '.join(names)}), one NLP" if args.joint else names[0]
     result.to_json(args.out)
     _print_calibration(result, title)
     print(f"wrote {args.out}")
@@ -471,8 +479,8 @@ def cmd_demo(args) -> int:
     truth = calib_case.truth.radius_vectors_m
     if calib.attitude_frame == "transducer":
         truth = truth @ np.asarray(euler_matrix(*calib_case.truth.installation_ypr_rad))
-    attitude_fit_figure(calib_case, calib.attitude, out / "attitude_fit.png")
-    radius_vectors_figure(calib.lever_arms_sensor_m, calib.lever_arms_sensor_se_m, truth, label, out / "radius_vectors.png")
+    attitude_fit_figure(calib_case, calib.attitude, out / f"attitude_fit.{args.format}")
+    radius_vectors_figure(calib.lever_arms_sensor_m, calib.lever_arms_sensor_se_m, truth, label, out / f"radius_vectors.{args.format}")
 
     # 2. measurement runs: every correction method against truth (the paper's Tables 8 and 12)
     calibration = _load_calibration(out / "calibration.json")
@@ -492,13 +500,14 @@ def cmd_demo(args) -> int:
               f"{100 * (a - r_) / (a - o):.0f}% of the ASC-to-oracle gap")
         summary[name] = table
         velocity_figure(case.pings.time_s, {m: results[m].vessel_velocity_m_s for m in ("asc", "adc", "oracle")}, vt,
-                        f"{name} (seed {args.seed}): static vs dynamic correction", out / f"{name}_velocity.png")
+                        f"{name} (seed {args.seed}): static vs dynamic correction", out / f"{name}_velocity.{args.format}")
     from .cases.atomic import atomic_path
 
     with atomic_path(out / "metrics.json") as tmp, open(tmp, "w") as fh:
         json.dump(summary, fh, indent=2)
-    print(f"\nsaved in {out}/: calibration.json, attitude_fit.png, radius_vectors.png, "
-          + ", ".join(f"{n}_velocity.png" for n in args.scenario) + ", metrics.json, corrected and case files")
+    fmt = args.format
+    print(f"\nsaved in {out}/: calibration.json, attitude_fit.{fmt}, radius_vectors.{fmt}, "
+          + ", ".join(f"{n}_velocity.{fmt}" for n in args.scenario) + ", metrics.json, corrected and case files")
     return 0
 
 
@@ -507,26 +516,24 @@ def cmd_diagnose(args) -> int:
         return _diagnose_selftest(args)
     if not args.case or not args.out:
         raise ValueError("diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)")
+    from .api import diagnose
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
-    from .estimators.diagnosis.diagnose import DiagnosisConfig, diagnose
     from .estimators.diagnosis.report import table, write_report
 
     if is_many(args.case) and not args.joint:
         raise ValueError("diagnose: several cases: add --joint to diagnose them together (one boat, shared and per-run effects)")
     paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
     check_output_file(args.out, *paths, args.calibration)
-    calibration = _load_calibration(args.calibration)
-    cases = [as_calibrated_run(_prepare(p)[0], p, calibration) for p in paths]
-    if len({c.name for c in cases}) < len(cases):  # runs of one scenario share a name: key them by file
-        cases = [c.replace(name=Path(p).stem) for c, p in zip(cases, paths)]
-    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
-                             attitude=args.attitude)
-    result = diagnose(cases if args.joint else cases[0], config, calibration=calibration,
-                      progress=lambda name: print(f"  fitted {name}", file=sys.stderr))
-    paths = write_report(result, args.out)
+    progress = _DiagnosisProgress("diagnose", len(paths))
+    result = diagnose(paths if args.joint else paths[0], args.calibration, effects=args.effects, attitude=args.attitude,
+                      progress=progress.fitted_model)
+    progress(f"done: verdict {result.verdict}")
+    for w in result.base.get("case_warnings", []):
+        print(f"warning: {w}")
+    written = write_report(result, args.out, fmt=args.format)
     print(table(result))
-    print("wrote " + ", ".join(str(p) for p in paths))
+    print("wrote " + ", ".join(str(p) for p in written))
     return 0 if result.base["success"] else 1
 
 
@@ -604,16 +611,39 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see `{self.prog} --help`)\n")
 
 
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Each option's default in its help (when it has one), epilogs kept as written."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("%(default)" not in text and action.option_strings and action.default not in (None, False, argparse.SUPPRESS)
+                and not action.required):
+            text += " (default: %(default)s)"
+        return text
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="adcpdyn", description=__doc__)
-    sub = p.add_subparsers(dest="command", required=True)
+    from . import __version__
+    from .api import CORRECTION_METHODS, REFERENCES
 
-    s = sub.add_parser("scenarios", help="list the built-in scenarios")
-    s.set_defaults(func=cmd_scenarios)
+    p = _Parser(prog="adcpdyn", description=__doc__, epilog=EXIT_STATUS, formatter_class=_HelpFormatter)
+    p.add_argument("--version", action="version", version=f"adcpdyn {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, title="commands", metavar="command")
 
-    s = sub.add_parser("simulate", help="simulate a scenario into a case file (a survey's transects with --runs)")
-    s.add_argument("scenario")
-    s.add_argument("--seed", type=_seed, default=0)
+    def command(name, help, func):
+        s = sub.add_parser(name, help=help, description=help[0].upper() + help[1:] + ".", epilog=EXIT_STATUS,
+                           formatter_class=_HelpFormatter)
+        s.set_defaults(func=func)
+        return s
+
+    def figure_format(s):
+        s.add_argument("--format", default="png", choices=FIGURE_FORMATS, help="file format of the figures")
+
+    command("scenarios", "list the built-in scenarios", cmd_scenarios)
+
+    s = command("simulate", "simulate a scenario into a case file (a survey's transects with --runs)", cmd_simulate)
+    s.add_argument("scenario", help="a built-in scenario (`adcpdyn scenarios`)")
+    s.add_argument("--seed", type=_seed, default=0, help="noise seed")
     s.add_argument("--out", required=True, help="CASE.h5; with --runs a folder (NAME_run01.h5, ...)")
     s.add_argument("--runs", type=_count,
                    help="a survey's number of transects (alternating banks; seeds SEED, SEED+1, ...)")
@@ -621,74 +651,80 @@ def build_parser() -> argparse.ArgumentParser:
                    help="survey: fix the compass deviation (heading reads psi + A + B sin psi + C cos psi); default drawn")
     s.add_argument("--bed-speed", type=_finite, help="survey: fix the moving bed's speed downstream, m/s; default drawn")
     s.add_argument("--bed-profile", choices=["uniform", "parabolic"], help="survey: bed speed across the section")
-    s.set_defaults(func=cmd_simulate)
 
-    s = sub.add_parser("import", help="import a TRDI PD0 or Nortek AD2CP file into a case file")
+    s = command("import", "import a TRDI PD0 or Nortek AD2CP file into a case file", cmd_import)
     s.add_argument("file", help="instrument file (.PD0, .000, .ENS, .ENR, .ad2cp, ...)")
     s.add_argument("--out", required=True, help="CASE.h5 (never the input file)")
     s.add_argument("--start", type=_finite, help="first ping to keep, seconds from the file's first ping")
     s.add_argument("--end", type=_finite, help="last ping to keep, seconds from the file's first ping")
     s.add_argument("--every", type=_count, default=1, help="keep every n-th ping (decimation for long files)")
-    s.set_defaults(func=cmd_import)
 
-    s = sub.add_parser("info", help="summarise a case file")
-    s.add_argument("case")
-    s.set_defaults(func=cmd_info)
+    s = command("info", "summarise a case file", cmd_info)
+    s.add_argument("case", help="CASE.h5")
 
     def batch_options(s):
-        s.add_argument("--scheduler", default="local",
-                       help="many cases: local (a Dask LocalCluster, default), none (serial) or a scheduler address")
-        s.add_argument("--workers", type=_count, default=None, help="many cases: LocalCluster worker processes")
+        s.add_argument("--scheduler", default="auto",
+                       help="many cases: auto (in this process for 1-2 cases, else a Dask LocalCluster), local (a "
+                            "LocalCluster), none (one after another here) or a scheduler address tcp://HOST:PORT")
+        s.add_argument("--workers", type=_count, default=None, help="many cases: LocalCluster worker processes "
+                       "(default: one per CPU, at most one per case)")
 
-    s = sub.add_parser("correct", help="correct every ping of a case (or of many: files, a folder or a glob)")
+    s = command("correct", "correct every ping of a case (or of many: files, a folder or a glob)", cmd_correct)
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
     batch_options(s)
-    s.add_argument("--method", default="asc", help="asc | adc | paper_literal | rootfinder | oracle")
-    s.add_argument("--timing", default="deep",
-                   help="deep (Eqs. 66-70) | shallow | exact (rootfinder, oracle: travel time with the moving transducer)")
+    s.add_argument("--method", default="asc", choices=CORRECTION_METHODS,
+                   help="asc: static (installation angles or heading misalignment); adc, paper_literal, rootfinder: "
+                        "dynamic, with the calibration's lever arms; oracle: a simulated case's truth")
+    s.add_argument("--timing", default="deep", choices=TIMINGS,
+                   help="travel-time model of the dynamic methods: deep (Eqs. 66-70), shallow, or exact (rootfinder, "
+                        "oracle: travel time with the moving transducer)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
-    s.add_argument("--reference", default="bt",
-                   help="water velocities referenced to the bottom track (bt, default) or to the GNSS velocity (gnss)")
+    s.add_argument("--reference", default="bt", choices=REFERENCES,
+                   help="water velocities referenced to the bottom track (bt) or to the GNSS velocity (gnss)")
     s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
-    s.set_defaults(func=cmd_correct)
 
-    s = sub.add_parser("export", help="a case or a corrected file as CF-1.8 netCDF (ENU, UTC time, xarray-ready)")
+    s = command("export", "a case or a corrected file as CF-1.8 netCDF (ENU, UTC time, xarray-ready)", cmd_export)
     s.add_argument("input", help="CASE.h5 or the output of `adcpdyn correct` (OUT.h5)")
     s.add_argument("--case", help="a corrected file's case (default: the case it names)")
     s.add_argument("--out", required=True, help="OUT.nc")
-    s.set_defaults(func=cmd_export)
 
-    s = sub.add_parser("compare", help="every correction method on one case: metrics table and figures")
-    s.add_argument("case")
-    s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
+    s = command("compare", "every correction method on one case: metrics table and figures", cmd_compare)
+    s.add_argument("case", help="CASE.h5 (with /truth, or a GNSS reference)")
+    s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (without one: asc and oracle only)")
     s.add_argument("--out", help="folder for the table (JSON) and figure")
-    s.set_defaults(func=cmd_compare)
+    figure_format(s)
 
     def calibration_options(s):
-        s.add_argument("--formulation", default="exact", help="paper | exact | minimal | free")
+        s.add_argument("--formulation", default="exact", choices=["paper", "exact", "minimal", "free"],
+                       help="lever-arm constraints: paper (Janus conditions relaxed), exact (equalities), minimal "
+                            "(r_i = Lambda T_i + P), free (twelve coordinates)")
         s.add_argument("--starts", type=_count, default=24, help="multistart size")
         s.add_argument("--seed", type=_seed, default=0, help="seed of the start design")
-        s.add_argument("--method", default="joint", help="joint | two-stage")
-        s.add_argument("--timing", default="auto", help="auto | shallow | deep | exact bottom-track model")
-        s.add_argument("--tangential", default="consistent", help="consistent | paper_literal")
-        s.add_argument("--attitude", default="auto",
-                       help="auto | model (damped-mode model fitted jointly) | samples (the sensor's samples, for runs "
-                            "no motion model follows)")
-        s.add_argument("--jacobian", default="auto",
-                       help="auto | symbolic (whole problem differentiated by CasADi) | assembled (per-row, long runs)")
+        s.add_argument("--method", default="joint", choices=["joint", "two-stage"],
+                       help="joint (one NLP) or two-stage (the paper's)")
+        s.add_argument("--timing", default="auto", choices=["auto", "shallow", "deep", "exact"],
+                       help="bottom-track model (auto: by the round-trip time)")
+        s.add_argument("--tangential", default="consistent", choices=["consistent", "paper_literal"],
+                       help="tangential velocity dLambda/dt r (consistent) or the printed Omega r")
+        s.add_argument("--attitude", default="auto", choices=["auto", "model", "samples"],
+                       help="the beams' attitude: model (damped-mode model fitted jointly), samples (the sensor's "
+                            "samples, for runs no motion model follows) or auto")
+        s.add_argument("--jacobian", default="auto", choices=["auto", "symbolic", "assembled"],
+                       help="symbolic (whole problem differentiated by CasADi) or assembled (per row, long runs)")
         s.add_argument("--moving-bed", default="auto", choices=["auto", "off", "constant", "section"],
                        help="bed moving under the bottom track: auto (constant with a moving reference), off (a bed "
                             "verified fixed), constant, or section (a function of the position along the section)")
         s.add_argument("--bed-knots", type=_int_at_least(2), default=3, help="--moving-bed section: values across the section")
         s.add_argument("--compass-deviation", default="auto", choices=["auto", "on", "off"],
-                       help="head sensor: add B sin(heading) + C cos(heading) to the misalignment (auto: when the "
-                            "headings span enough)")
+                       help="head sensor: add B sin(heading) + C cos(heading) to the misalignment (auto: with a prior, "
+                            "when the headings span enough)")
         s.add_argument("--standard-errors", default="hac", choices=["hac", "white"],
                        help="hac (Newey-West sandwich, coloured residuals) or white")
         s.add_argument("--declination-deg", type=_finite,
                        help="magnetic declination at the site (east positive), when the cases carry no position and date")
 
-    s = sub.add_parser("calibrate", help="estimate attitude model, lever arms and installation angles (one or many cases)")
+    s = command("calibrate", "estimate attitude model, lever arms and installation angles (one or many cases)",
+                cmd_calibrate)
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")
     calibration_options(s)
     batch_options(s)
@@ -696,43 +732,44 @@ def build_parser() -> argparse.ArgumentParser:
                    help="several runs of one boat at one site in ONE NLP (shared lever arms, installation or heading "
                         "misalignment, moving bed); --out is then one CALIB.json")
     s.add_argument("--out", required=True, help="CALIB.json; with many cases (not --joint), a folder (CASE.json each, summary.json)")
-    s.set_defaults(func=cmd_calibrate)
 
-    s = sub.add_parser("compare-formulations", help="calibrate with every constraint formulation and tabulate")
-    s.add_argument("case")
+    s = command("compare-formulations", "calibrate with every constraint formulation and tabulate",
+                cmd_compare_formulations)
+    s.add_argument("case", help="CASE.h5")
     calibration_options(s)
     s.add_argument("--out", help="optional JSON of the table")
-    s.set_defaults(func=cmd_compare_formulations)
 
-    s = sub.add_parser("diagnose", help="where the sim-to-real gap lies, which unmodelled effect causes it, how far it shrinks")
+    s = command("diagnose", "where the sim-to-real gap lies, which unmodelled effect causes it, how far it shrinks",
+                cmd_diagnose)
     s.add_argument("case", nargs="*", help="CASE.h5 (omit with --selftest); with --joint several runs, folders or globs")
     s.add_argument("--joint", action="store_true",
                    help="several runs of one boat together: shared effects (compass, beams, sound speed, latency, lever "
                         "arms) and per-run ones (moving bed, heave, forced roll); whole runs held out too")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (its platform quantities pinned in the base)")
     s.add_argument("--out", help="DIAG.json (DIAG.md and a figure are written beside it)")
-    s.add_argument("--effects", nargs="+", help="catalog effects to try (default: all)")
-    s.add_argument("--attitude", default="auto",
-                   help="auto | model (damped-mode motion model) | samples (the sensor's samples, runs no model follows)")
+    s.add_argument("--effects", nargs="+", metavar="EFFECT", help="catalog effects to try (default: all)")
+    s.add_argument("--attitude", default="auto", choices=["auto", "model", "samples"],
+                   help="the beams' attitude: model (damped-mode motion model), samples (the sensor's samples, runs no "
+                        "model follows) or auto")
     s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
     s.add_argument("--platforms", nargs="+", choices=["launch_vessel", "launch_head", "pool", "survey_ship", "river"],
                    help="self-test platforms to draw from (default: all)")
-    s.set_defaults(func=cmd_diagnose)
+    figure_format(s)
 
-    s = sub.add_parser("bench", help="benchmarks with their targets")
-    s.add_argument("suite", help="calibration | correction | formulations | solvers | scale | survey")
+    s = command("bench", "benchmarks with their targets", cmd_bench)
+    s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey"],
+                   help="which benchmark")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
-    s.add_argument("--out", default="benchmarks/results")
-    s.set_defaults(func=cmd_bench)
+    s.add_argument("--out", default="benchmarks/results", help="folder of the results")
 
-    s = sub.add_parser("demo", help="the main job on the built-in default case")
+    s = command("demo", "the main job on the built-in default case", cmd_demo)
     s.add_argument("--scenario", nargs="+", default=list(DEFAULT_CASES), help="measurement runs to correct")
     s.add_argument("--calibration-scenario", default="pool_m0", help="calibration run")
-    s.add_argument("--starts", type=_count, default=24)
-    s.add_argument("--seed", type=_seed, default=1)
-    s.add_argument("--out", default="demo_out")
-    s.set_defaults(func=cmd_demo)
+    s.add_argument("--starts", type=_count, default=24, help="multistart size")
+    s.add_argument("--seed", type=_seed, default=1, help="noise seed")
+    s.add_argument("--out", default="demo_out", help="output folder")
+    figure_format(s)
     return p
 
 
@@ -774,22 +811,26 @@ class _HeldStderr:
         self._saved = self._sink = None
 
     def __enter__(self):
+        global _LIVE_FD
         with contextlib.suppress(Exception):
             sys.stderr.flush()
         try:
             self._saved = os.dup(2)
             self._sink = tempfile.TemporaryFile()
             os.dup2(self._sink.fileno(), 2)
+            _LIVE_FD = self._saved  # progress lines still reach the terminal (_Progress)
         except OSError:
             self._saved = self._sink = None
         return self
 
     def __exit__(self, *exc):
+        global _LIVE_FD
         if self._saved is not None:
             with contextlib.suppress(Exception):
                 sys.stderr.flush()
             os.dup2(self._saved, 2)
             os.close(self._saved)
+            _LIVE_FD = None
         return False
 
     def replay(self) -> None:

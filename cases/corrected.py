@@ -4,7 +4,10 @@ Layout: ``/corrected/time_s`` (N,), ``vessel_velocity_m_s`` (N, 3),
 ``error_velocity_m_s`` (N,), ``beams_used`` (N,), and with a profile
 ``water_velocity_m_s`` (N, K, 3) (referenced: ``settings["water_reference"]``) and
 ``water_relative_velocity_m_s`` (N, K, 3) (not referenced); attributes ``method``,
-``source_case`` and the method's own settings (JSON).
+``source_case`` and the method's own settings (JSON: heading misalignment, declination and
+moving bed applied, calibration file and SHA-256, ...). Provenance: the root attributes
+``adcpdyn_version`` and ``written_utc``, ``/corrected`` attributes ``source_case_name`` and
+``source_case_sha256``.
 """
 
 from __future__ import annotations
@@ -41,13 +44,25 @@ class Correction:
 
 def write_correction(correction, path, source_case: str = "") -> None:
     """Write a :class:`Correction` to ``path`` atomically."""
+    import datetime as dt
+    from pathlib import Path
+
+    from .hashing import sha256_of
+    from .netcdf import adcpdyn_version
+
+    sha = correction.attrs.get("source_case_sha256") or (
+        sha256_of(source_case) if source_case and Path(source_case).is_file() else "not available (no case file)")
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = "adcp-corrected"
             f.attrs["version"] = 1
+            f.attrs["adcpdyn_version"] = adcpdyn_version()
+            f.attrs["written_utc"] = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
             g = f.create_group("corrected")
             g.attrs["method"] = correction.method
             g.attrs["source_case"] = str(source_case)
+            g.attrs["source_case_name"] = str(correction.attrs.get("source_case_name") or "")
+            g.attrs["source_case_sha256"] = str(sha)
             g.attrs["settings"] = json.dumps(correction.attrs)
             g.create_dataset("time_s", data=np.asarray(correction.time_s, dtype=float))
             g.create_dataset("vessel_velocity_m_s", data=np.asarray(correction.vessel_velocity_m_s, dtype=float))

@@ -440,6 +440,10 @@ def export_file(input_path, out, case_path=None, history: str | None = None):
             raise ValueError(f"--case: only with a corrected file; {input_path} is a case file itself")
         case_path = input_path
     case = read_case(case_path)
+    if correction is not None:  # corrected as `correct` did: the pings the attitude record covers
+        from .coverage import restrict_to_coverage
+
+        case = restrict_to_coverage(case, source=str(case_path))[0]
     ds = to_xarray(case, correction, provenance=read_provenance(case_path), source_case_path=case_path, history=history)
     if correction is not None:
         ds.attrs["source_corrected_file"] = str(input_path)

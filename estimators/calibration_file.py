@@ -203,6 +203,7 @@ KEYS: dict[str, Key] = {
     "standard_errors": Key("object"),
     "confounded": Key("list"),
     "runs": Key("list", check=_runs),
+    "provenance": Key("object"),  # adcpdyn version, source cases and their SHA-256, time written
 }
 
 # A file holding none of these is not a calibration.
@@ -370,9 +371,15 @@ def as_calibration(d) -> Calibration:
     """A calibration handed over in memory, validated: a :class:`Calibration` as it is, any
     other dict (e.g. ``CalibrationResult.to_dict()``) with the writer's convention (numpy
     values as numbers, NaN and infinities as null: not determined). A file is stricter:
-    NaN or Infinity there is an error (:func:`read_calibration`)."""
+    NaN or Infinity there is an error (:func:`read_calibration`). Anything else (a CALIB.json
+    path, a ``CalibrationResult``, a ``CalibrationRecord``) goes through
+    :func:`~adcpdyn.estimators.calibration_record.calibration_dict`."""
     if isinstance(d, Calibration):
         return d
+    if not isinstance(d, dict):
+        from .calibration_record import calibration_dict
+
+        return calibration_dict(d)
     return validate_calibration(_plain(d))
 
 

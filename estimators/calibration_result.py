@@ -145,6 +145,8 @@ class CalibrationResult:
     standard_errors: dict = field(default_factory=dict)
     confounded: list = field(default_factory=list)
     runs: list = field(default_factory=list)
+    # where it came from, for CALIB.json's ``provenance``: {"cases": [{"name", "path", "sha256"}, ...], ...}
+    provenance: dict = field(default_factory=dict)
 
     @property
     def success(self) -> bool:
@@ -216,6 +218,7 @@ class CalibrationResult:
             "warnings": self.warnings,
             "config": {k: v for k, v in asdict(self.config).items() if k != "solver"},
             "runs": [r.to_dict() for r in self.runs],
+            "provenance": provenance_block(self),
         }
         if self.moving_bed == "section":
             out["moving_bed"].update({"section_positions": np.linspace(0, 1, len(self.moving_bed_knots_m_s)).tolist(),
@@ -237,8 +240,41 @@ class CalibrationResult:
         return jsonable(out)
 
     def to_json(self, path) -> None:
+        """Write CALIB.json atomically, its ``provenance`` stamped with the UTC time of writing."""
+        import datetime as dt
+
         from ..cases.atomic import atomic_path
 
+        d = self.to_dict()
+        d["provenance"]["written_utc"] = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
         with atomic_path(path) as tmp:
             with open(tmp, "w") as fh:
-                json.dump(self.to_dict(), fh, indent=2)
+                json.dump(d, fh, indent=2)
+
+    @classmethod
+    def from_json(cls, path):
+        """Read a CALIB.json back as a typed, read-only record.
+
+        Returns a :class:`~adcpdyn.estimators.calibration_record.CalibrationRecord`, not a
+        ``CalibrationResult``: a CALIB.json holds the estimates, their standard errors, the
+        attitude model and source, the noise levels, each run's bed and the provenance (all
+        typed on the record), but not the solver's objects (multistart, uncertainty,
+        configuration dataclass) a full result carries, so none is rebuilt. The record is
+        accepted wherever a calibration is (``adcpdyn.correct``, ``adcpdyn.diagnose``, ...).
+
+        Raises
+        ------
+        ValueError
+            One line naming the file and the key (an unreadable or invalid file).
+        """
+        from .calibration_record import CalibrationRecord
+
+        return CalibrationRecord.from_json(path)
+
+
+def provenance_block(result) -> dict:
+    """CALIB.json's ``provenance``: the adcpdyn version and what the result says it came from."""
+    from ..cases.netcdf import adcpdyn_version
+
+    cases = result.provenance.get("cases") or [{"name": r.case} for r in result.runs]
+    return jsonable({"adcpdyn_version": adcpdyn_version(), **result.provenance, "cases": cases})

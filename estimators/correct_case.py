@@ -60,6 +60,10 @@ def as_calibrated_run(case: Case, path, calibration: dict | None) -> Case:
     the case named so that :func:`moving_bed_for` finds its own run."""
     from pathlib import Path
 
+    if calibration is not None and not isinstance(calibration, dict):
+        from .calibration_record import calibration_dict
+
+        calibration = calibration_dict(calibration)
     runs = [r.get("case") for r in (calibration or {}).get("runs") or []]
     if case.name not in runs and Path(path).stem in runs:
         return case.replace(name=Path(path).stem)
@@ -81,23 +85,31 @@ def with_moving_bed(result, bed: np.ndarray, source: str):
                                attrs=attrs)
 
 
-def correct_case(case: Case, method: str, calibration: dict | None, timing: str = "deep", reference: str = "bt"):
+def correct_case(case: Case, method: str, calibration=None, timing: str = "deep", reference: str = "bt"):
     """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
     sensor, its heading misalignment) or a dynamic method of
     :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``; then the moving bed
     the calibration found under this case added back (:func:`moving_bed_for`). Water cells are
     referenced to the bottom track or to the GNSS (``reference``: ``bt`` | ``gnss``,
-    :mod:`adcpdyn.estimators.water`); the heading corrections applied are in the result's attrs."""
+    :mod:`adcpdyn.estimators.water`); the heading corrections applied are in the result's attrs.
+
+    ``calibration``: None, a CALIB.json path, a parsed dict, a ``CalibrationResult`` or a
+    ``CalibrationRecord`` (:func:`~adcpdyn.estimators.calibration_record.calibration_dict`)."""
+    from .calibration_record import calibration_dict
     from .water import check_reference
 
     check_reference(reference)
+    calibration = calibration_dict(calibration)
     case, depth_note = with_calibrated_depth(case, calibration) if method != "oracle" else (case, "")
     result = _correct(case, method, calibration, timing, reference)
     result.attrs.update(heading_corrections_applied(case, calibration if method != "oracle" else None))
     if depth_note:
         result.attrs["transducer_depth_note"] = depth_note
     bed, source = moving_bed_for(calibration, case) if method != "oracle" else _true_bed(case)
-    return result if bed is None else with_moving_bed(result, bed, source)
+    if bed is None:
+        result.attrs["moving_bed_velocity_m_s"] = None  # recorded: none applied
+        return result
+    return with_moving_bed(result, bed, source)
 
 
 def heading_corrections_applied(case: Case, calibration: dict | None) -> dict:
@@ -109,7 +121,8 @@ def heading_corrections_applied(case: Case, calibration: dict | None) -> dict:
         why = ("no calibration" if calibration is None else
                "vessel-frame attitude: installation angles instead" if case.attitude.frame != "transducer" else
                "the calibration has no heading misalignment")
-        return {"heading_misalignment_applied_rad": None, "heading_correction_note": f"headings as recorded ({why})"}
+        return {"heading_misalignment_applied_rad": None, "heading_correction_note": f"headings as recorded ({why})",
+                "magnetic_declination_rad": None if calibration is None else calibration.get("magnetic_declination_rad")}
     return {
         "heading_misalignment_applied_rad": float(delta),
         "compass_deviation_applied_rad": calibration.get("compass_deviation_rad"),

@@ -16,7 +16,7 @@ import numpy as np
 from .reader import ImportFailure
 from .window import Window
 
-__all__ = ["ImportFailure", "Window", "detect_vendor", "import_file", "write_imported"]
+__all__ = ["ImportFailure", "Window", "detect_vendor", "import_dataset", "import_file", "write_imported"]
 
 TRDI_SUFFIXES = (".pd0", ".000", ".ens", ".enr", ".enx", ".sta", ".lta")
 NORTEK_SUFFIXES = (".ad2cp",)
@@ -61,6 +61,38 @@ def import_file(path, window: Window | None = None):
     vendor = detect_vendor(path)
     with quiet_reader() as chatter:
         case, attrs = (import_trdi if vendor == "trdi" else import_nortek)(path, window)
+    if chatter.messages:
+        attrs.setdefault("/provenance", {})["reader_messages"] = chatter.summary()
+    return case, attrs
+
+
+def import_dataset(ds, window: Window | None = None, name: str | None = None):
+    """A dolfyn :class:`xarray.Dataset` of a TRDI file (``mhkit.dolfyn.read``) into ``(case, attrs)``.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        What dolfyn read from a TRDI PD0 file (Nortek datasets are refused, as their files are).
+    window : Window, optional
+    name : str, optional
+        The case's name (default ``dataset``).
+
+    Raises
+    ------
+    ImportFailure
+        Not a dolfyn TRDI dataset, or what it lacks (one line).
+    """
+    from .reader import quiet_reader
+    from .trdi import import_trdi_dataset
+
+    if not (hasattr(ds, "attrs") and hasattr(ds, "data_vars")):
+        raise ImportFailure(f"source: expected an instrument file path or a dolfyn xarray.Dataset, got {type(ds).__name__}")
+    make = str(ds.attrs.get("inst_make", "")).upper()
+    if make and make not in ("TRDI", "RDI"):
+        raise ImportFailure(f"source: inst_make: expected a TRDI dataset (Nortek bottom track is not imported, see "
+                            f"`adcpdyn import`), got {ds.attrs.get('inst_make')!r}")
+    with quiet_reader() as chatter:
+        case, attrs = import_trdi_dataset(ds, window or Window(), str(name or "dataset"))
     if chatter.messages:
         attrs.setdefault("/provenance", {})["reader_messages"] = chatter.summary()
     return case, attrs

@@ -58,6 +58,30 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     """
     with rdi_water.cell_size_history() as cell_sizes:
         ds, version = read_dolfyn(path)
+    return _from_dataset(ds, version, window, path, getattr(path, "stem", str(path)), cell_sizes)
+
+
+def import_trdi_dataset(ds, window: Window, name: str) -> tuple[Case, dict]:
+    """A case from the :class:`xarray.Dataset` ``mhkit.dolfyn.read`` returned for a TRDI file.
+
+    The same conversions as :func:`import_trdi`, with what only the file holds missing and
+    said so in ``/provenance``: the GNSS comes from dolfyn's own fields only (NMEA text
+    sentences in the file are not seen; dolfyn keeps positions as float32 unless read as
+    adcpdyn reads them), the cell-size changes dolfyn merged are unknown, and there is no
+    SHA-256 of the instrument file.
+    """
+    try:
+        import mhkit
+
+        version = f"a dolfyn Dataset handed over in memory (installed reader: mhkit {mhkit.__version__})"
+    except ImportError:
+        version = "a dolfyn Dataset handed over in memory"
+    return _from_dataset(ds, version, window, None, name, None)
+
+
+def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes) -> tuple[Case, dict]:
+    """The conversions of a dolfyn TRDI dataset; ``file`` is the instrument file (None for a Dataset in memory)."""
+    path = file if file is not None else f"dataset {name!r}"
     a = ds.attrs
     if "vel_bt" not in ds:
         raise ImportFailure(f"{path}: bottom track: none in this file (no TRDI bottom-track block); "
@@ -115,11 +139,14 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     water_depth = transducer_depth + np.interp(t_rel, t_rel[ok], mean_vert[ok])
     frame = "transducer" if all(internal.values()) else "vessel"
     water, water_attrs = rdi_water.water_profile(ds, coord, beam_angle, convex, rot, keep, transducer_depth,
-                                                 float(np.max(water_depth)), cell_sizes)
+                                                 float(np.max(water_depth)), cell_sizes or ())
+    if cell_sizes is None and water is not None:
+        water_attrs["cell_size_changes"] = ("unknown: the Dataset was read outside adcpdyn, so the cell-size changes "
+                                            "dolfyn merged were not seen")
     attitude_missing = bool(np.all(ang["heading"] == 0) and np.all(ang["pitch"] == 0) and np.all(ang["roll"] == 0))
 
     case = Case(
-        name=str(getattr(path, "stem", path)),
+        name=str(name),
         description=f"imported from {path} by adcpdyn import ({version})",
         instrument=Instrument(beam_angle_rad=float(beam_angle), transducer_radius_m=0.0,
                               frequency_hz=float(a["carrier_freq"]) * 1e3, sound_speed_m_s=float(np.nanmedian(c_sound))),
@@ -131,7 +158,9 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
     )
     attrs = {
         "/provenance": {
-            "source_file": str(path), "source_file_sha256": sha256_of(path), "reader": version, "vendor": "TRDI",
+            "source_file": str(path) if file is not None else f"{name} (a dolfyn Dataset in memory; its file not known)",
+            "source_file_sha256": sha256_of(file) if file is not None else "not available (a Dataset in memory, not the file)",
+            "reader": version, "vendor": "TRDI",
             "instrument": f"{a.get('inst_model', '?')} {a.get('carrier_freq', '?')} kHz, SN {a.get('serialnum', '?')}, "
                           f"firmware {a.get('firmware_ver', '?')}",
             "source_program": str(a.get("source_program") or "unknown"),
@@ -176,7 +205,7 @@ def import_trdi(path, window: Window) -> tuple[Case, dict]:
         attrs["/attitude"]["attitude_warning"] = ("every heading, pitch and roll sample in the file is exactly 0: the file "
                                                   "holds no attitude (e.g. a VmDAS ENR without its navigation files); the "
                                                   "zeros are passed through as recorded and nothing that uses attitude is meaningful")
-    return _with_reference(case, attrs, ds, path, t_abs)
+    return _with_reference(case, attrs, ds, file, t_abs)
 
 
 def _heading_settings(ea: float, eb: float) -> dict:
@@ -211,13 +240,16 @@ def _position(track, offset: float, t_abs, case: Case) -> tuple[Position | None,
 
 
 def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dict]:
-    """Attach the GNSS reference velocity when the file carries usable NMEA."""
+    """Attach the GNSS reference velocity when the file carries usable NMEA (``path`` None: a Dataset in
+    memory, only dolfyn's own GNSS fields)."""
     from ...models.frames import beams_to_earth, sensed_rotation
 
     try:
         coarse = gnss.coarse_offset(ds)
-        with open(path, "rb") as fh:
-            raw = fh.read()
+        raw = b""
+        if path is not None:
+            with open(path, "rb") as fh:
+                raw = fh.read()
         track = gnss.read_track(raw, ds, coarse, float(t_abs[0]))
     except ValueError as exc:
         attrs["/provenance"]["gnss"] = f"none: {exc}"

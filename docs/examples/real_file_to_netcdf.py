@@ -10,52 +10,47 @@ block is one notebook cell.
 """
 
 # %% Inputs
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from adcpdyn.cases.importers import import_file, write_imported
-from adcpdyn.cases.io import read_case
-from adcpdyn.cases.netcdf import read_provenance, to_xarray, write_netcdf
-from adcpdyn.estimators.calibration import CalibrationConfig, calibrate
-from adcpdyn.estimators.correct_case import correct_case
+import adcpdyn
 
 ROOT = Path(__file__).resolve().parents[2]
 source = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / ".." / "shared" / "data" / "real" / "RiverPro_test01.PD0"
 out = Path(sys.argv[2]) if len(sys.argv) > 2 else Path("example_out")
 out.mkdir(parents=True, exist_ok=True)
+print(f"adcpdyn {adcpdyn.__version__}")
 
 # %% 1. Import: bottom track and water profile back in beam coordinates, GNSS, attitude, provenance
-case, audit = import_file(source)
-case_path = out / f"{case.name}.h5"
-write_imported(case, audit, case_path, source=source)
-case = read_case(case_path)
+imported = adcpdyn.import_file(source, out=out / f"{source.stem}.h5")  # also writes the case file
+case = imported.case
 print(f"imported {source.name}: {case.pings.n} pings, {case.water.cell_depth_m.size} cells "
       f"({case.water.cell_depth_m[0]:.2f}-{case.water.cell_depth_m[-1]:.2f} m), file frame "
-      f"{audit['/provenance']['coordinate_system_found']}, UTC origin {case.time_origin_utc}")
+      f"{imported.provenance['coordinate_system_found']}, UTC origin {case.time_origin_utc}")
 
 # %% 2. Calibrate (two starts are enough for a look; `adcpdyn calibrate` uses 24)
-result = calibrate(case, CalibrationConfig(n_starts=2))  # its warnings are in result.warnings
+result = adcpdyn.calibrate(imported, n_starts=2)  # a list of cases calibrates them jointly
 calib_path = out / "CALIB.json"
-result.to_json(calib_path)
-calibration = json.loads(calib_path.read_text())
+result.to_json(calib_path)  # schema 2, with provenance: adcpdyn version, the case and its SHA-256
 print(f"calibrated: {'converged' if result.success else 'NOT converged'}, heading misalignment "
       f"{np.rad2deg(result.heading_misalignment_rad):+.2f} +- {np.rad2deg(result.heading_misalignment_se_rad):.2f} deg")
+calibration = adcpdyn.read_calibration(calib_path)  # typed: CalibrationRecord (CalibrationResult.from_json)
+print(f"CALIB.json: schema {calibration.schema_version}, sensor frame {calibration.attitude_frame}, "
+      f"moving bed {calibration.moving_bed}")
 
 # %% 3. Correct bottom track and water: static correction, water referenced to the bottom track
-corrected = correct_case(case, "asc", calibration, reference="bt")
-corrected.attrs.update(calibration_file=str(calib_path))
+# (the calibration may be the file, the record or the result in memory: the same numbers)
+corrected = adcpdyn.correct(imported, "asc", calib_path, reference="bt")
 v = corrected.vessel_velocity_m_s
 print(f"corrected ({corrected.method}): vessel speed {np.nanmedian(np.hypot(v[:, 0], v[:, 1])):.3f} m/s median, "
       f"{int(np.isfinite(corrected.water_velocity_m_s[..., 0]).sum())} water cell velocities")
 
-# %% 4. Export CF-1.8 netCDF (ENU, UTC time, instrument beam numbers)
-nc_path = out / f"{case.name}_asc.nc"
-write_netcdf(to_xarray(case, corrected, provenance=read_provenance(case_path), source_case_path=case_path,
-                       history="docs/examples/real_file_to_netcdf.py"), nc_path)
+# %% 4. Export CF-1.8 netCDF (ENU, UTC time, instrument beam numbers, provenance)
+nc_path = adcpdyn.export(imported, out / f"{case.name}_asc.nc", corrected,
+                         history="docs/examples/real_file_to_netcdf.py")
 print(f"wrote {nc_path}")
 
 # %% 5. Open it with xarray
@@ -74,4 +69,7 @@ for depth, value, n in zip(ds.depth.values, profile.values, speed.count("time").
     print(f"  {depth:6.2f} m  {value:.3f}  ({int(n)} pings)")
 print(f"method {ds.attrs['processing_method']}, water referenced to {ds.attrs['water_reference']}, "
       f"{ds.attrs['heading_correction']}")
+print(f"provenance: adcpdyn {ds.attrs['adcpdyn_version']}, case {ds.attrs['source_case']} "
+      f"(sha256 {ds.attrs['source_case_sha256'][:12]}...), calibration {ds.attrs['calibration_file']}, "
+      f"instrument file sha256 {ds.attrs['source_file_sha256'][:12]}...")
 ds.close()

@@ -50,8 +50,9 @@ def table(result, n_where: int = 6) -> str:
     return "\n".join(lines) + "\n"
 
 
-def figures(result, folder) -> list[Path]:
-    """Residuals over time and their Lomb-Scargle spectra per channel, base vs verdict."""
+def figures(result, folder, fmt: str = "png") -> list[Path]:
+    """Residuals over time and their Lomb-Scargle spectra per channel, base vs verdict (panels
+    lettered (a), (b), ...; ``fmt``: png, pdf or svg)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -84,20 +85,23 @@ def figures(result, folder) -> list[Path]:
     axes[0, 1].set_title("Lomb-Scargle power (rad/s)")
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("angular frequency (rad/s)")
+    from ...plots import panel_letters
+
+    panel_letters(axes)
     fig.tight_layout()
     stem = result.runs[0] + (f"_and_{len(result.runs) - 1}_more" if len(result.runs) > 1 else "") if result.runs else result.case
-    out = folder / f"{stem}_residuals.png"
-    with atomic_path(out, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=90)
+    out = folder / f"{stem}_residuals.{fmt}"
+    with atomic_path(out, suffix=f".{fmt}") as tmp:
+        fig.savefig(tmp, dpi=90, format=fmt)
     plt.close(fig)
     return [out]
 
 
-def write_report(result, json_path) -> list[Path]:
-    """DIAG.json plus DIAG.md and the figure beside it."""
+def write_report(result, json_path, fmt: str = "png") -> list[Path]:
+    """DIAG.json plus DIAG.md and the figure (``fmt``: png, pdf or svg) beside it."""
     json_path = Path(json_path)
     write_json(result, json_path)
     md = json_path.with_suffix(".md")
     with atomic_path(md) as tmp:
         Path(tmp).write_text(table(result))
-    return [json_path, md] + figures(result, json_path.parent)
+    return [json_path, md] + figures(result, json_path.parent, fmt)

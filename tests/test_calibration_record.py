@@ -1,0 +1,107 @@
+"""CALIB.json as a typed record (CalibrationResult.from_json), the one conversion of every form a
+calibration is handed over in, and CALIB.json's provenance."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from adcpdyn.cases.scenario import get_scenario
+from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
+from adcpdyn.estimators.calibration_record import CalibrationRecord, calibration_dict
+from adcpdyn.estimators.calibration_result import CalibrationResult
+from adcpdyn.estimators.correct_case import correct_case
+from adcpdyn.models.simulator import simulate
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """pool_m0 calibrated (2 starts), its CALIB.json, and pool_m1 to correct."""
+    folder = tmp_path_factory.mktemp("record")
+    m0 = simulate(get_scenario("pool_m0"), seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = CalibrationProblem(m0, CalibrationConfig(n_starts=2)).solve()
+    path = folder / "CALIB.json"
+    result.to_json(path)
+    return result, path, simulate(get_scenario("pool_m1"), seed=1)
+
+
+def test_correct_case_takes_the_result_its_dict_its_file_and_its_record_with_the_same_numbers(calibrated):
+    """The issue's symptom: correct_case rejected the CalibrationResult it was given ('get')."""
+    result, path, m1 = calibrated
+    forms = {"result": result, "dict": result.to_dict(), "path": path, "str": str(path),
+             "record": CalibrationResult.from_json(path), "parsed file": json.loads(path.read_text())}
+    for method in ("asc", "adc"):
+        out = {k: correct_case(m1, method, c).vessel_velocity_m_s for k, c in forms.items()}
+        assert np.isfinite(out["path"]).all()
+        for k, v in out.items():
+            np.testing.assert_array_equal(v, out["path"], err_msg=f"{method} with the {k}")
+    with pytest.raises(ValueError, match=r"^calibration: expected a CALIB.json path, a dict, a CalibrationResult"):
+        calibration_dict(3.0)
+    with pytest.raises(ValueError, match=r"^calibration .*nope.json: cannot read the file"):
+        correct_case(m1, "adc", path.parent / "nope.json")
+    assert calibration_dict(None) is None
+
+
+def test_from_json_round_trip(calibrated):
+    result, path, _ = calibrated
+    rec = CalibrationResult.from_json(path)
+    assert isinstance(rec, CalibrationRecord) and rec.source == str(path)
+    assert rec.schema_version == 2 and rec.attitude_frame == result.attitude_frame == "transducer"
+    determined = np.isfinite(result.lever_arms_sensor_se_m)
+    assert determined.any()
+    np.testing.assert_array_equal(rec.lever_arms_m[determined], result.lever_arms_sensor_m[determined])
+    assert np.all(np.isnan(rec.lever_arms_m[~determined]))
+    np.testing.assert_array_equal(rec.lever_arms_se_m, result.lever_arms_sensor_se_m)
+    assert rec.attitude_model.to_dict() == json.loads(json.dumps(result.attitude.to_dict()))
+    assert rec.attitude_source == result.attitude_source and rec.success == result.success
+    assert rec.noise_sigma == json.loads(json.dumps(result.noise_sigma))
+    assert [r.case for r in rec.runs] == [r.case for r in result.runs] == ["pool_m0"]
+    assert rec.runs[0].attitude_model is not None
+    assert rec.heading_misalignment_rad is None  # a run at rest: no course to turn onto
+    assert rec.to_dict() is rec.data and rec.data["schema_version"] == 2
+    assert calibration_dict(rec) is rec.data
+
+
+def test_calibration_json_records_its_provenance(calibrated):
+    result, path, _ = calibrated
+    from adcpdyn.cases.netcdf import adcpdyn_version
+
+    prov = json.loads(path.read_text())["provenance"]
+    assert prov["adcpdyn_version"] == adcpdyn_version() and prov["written_utc"].endswith("Z")
+    assert prov["cases"] == [{"name": "pool_m0"}]  # in memory: no file to hash
+    result.provenance = {"cases": [{"name": "pool_m0", "path": "m0.h5", "sha256": "ab" * 32}]}
+    try:
+        assert result.to_dict()["provenance"]["cases"][0]["sha256"] == "ab" * 32
+    finally:
+        result.provenance = {}
+
+
+def test_record_types_a_survey_calibration():
+    """Head sensor, misalignment, compass deviation, per-run beds, nulls: typed as the estimators read them."""
+    d = {"schema_version": 2, "attitude_frame": "transducer", "radius_vectors_m": [[0.1, 0.0, 0.5]] * 4,
+         "radius_vectors_head_m": [[0.2, None, 0.4]] * 4, "installation_ypr_rad": [0.2, None, None],
+         "heading_misalignment_rad": 0.2, "heading_misalignment_se_rad": 0.01, "magnetic_declination_rad": 0.27,
+         "compass_error_rad": -0.07, "compass_deviation_rad": {"sin": 0.004, "cos": -0.002, "mean_sin": 0.68,
+                                                                 "mean_cos": -0.16},
+         "compass_deviation_se_rad": {"sin": 0.01, "cos": 0.0},
+         "moving_bed": {"model": "constant"}, "moving_bed_velocity_m_s": [0.05, -0.15],
+         "runs": [{"case": "run01", "moving_bed_velocity_m_s": [0.04, None], "transducer_depth_offset_m": 0.02},
+                  {"case": "run02", "moving_bed_velocity_m_s": [0.06, -0.14]}]}
+    rec = CalibrationRecord.from_dict(d)
+    assert rec.lever_arms_m[0, 0] == 0.2 and np.isnan(rec.lever_arms_m[0, 1])
+    assert rec.radius_vectors_m[0].tolist() == [0.1, 0.0, 0.5]
+    assert rec.heading_misalignment_rad == 0.2 and rec.magnetic_declination_rad == 0.27
+    assert rec.compass_deviation_rad == (0.004, -0.002) and rec.compass_deviation_centre == (0.68, -0.16)
+    assert rec.compass_deviation_se_rad == (0.01, 0.0)
+    assert rec.moving_bed == "constant" and rec.provenance == {}
+    assert rec.moving_bed_for("run02").tolist() == [0.06, -0.14]
+    assert rec.moving_bed_for("run01").tolist() == [0.05, -0.15]  # its own is not determined: the site's
+    assert rec.run_for("run01").transducer_depth_offset_m == 0.02 and rec.run_for("nope") is None
+    with pytest.raises(ValueError, match=r"^calibration: runs\[1\].moving_bed_velocity_m_s\[0\]: expected"):
+        CalibrationRecord.from_dict({**d, "runs": [{"case": "x", "moving_bed_velocity_m_s": [0.0, 0.0]},
+                                                   {"case": "y", "moving_bed_velocity_m_s": [9.0, 0.0]}]})

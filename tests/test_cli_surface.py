@@ -1,0 +1,197 @@
+"""The command line's surface: --version, --help (every command, defaults, choices, exit statuses),
+exit statuses, progress on stderr, provenance of what the commands write, the in-process batch of one
+or two cases, and --format."""
+
+from __future__ import annotations
+
+import json
+import os
+from importlib.metadata import version
+
+import h5py
+import pytest
+
+import adcpdyn
+from adcpdyn.cases.hashing import sha256_of
+from adcpdyn.cli import build_parser, main
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory):
+    """pool_m0 and pool_m1 case files and a CALIB.json of pool_m0 (2 starts)."""
+    folder = tmp_path_factory.mktemp("cli")
+    m0, m1, calib = folder / "m0.h5", folder / "m1.h5", folder / "CALIB.json"
+    assert main(["simulate", "pool_m0", "--seed", "1", "--out", str(m0)]) == 0
+    assert main(["simulate", "pool_m1", "--seed", "1", "--out", str(m1)]) == 0
+    assert main(["calibrate", str(m0), "--starts", "2", "--out", str(calib)]) == 0
+    return None, calib, m0, m1
+
+
+def test_version(capsys):
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"adcpdyn {version('adcpdyn')}" == f"adcpdyn {adcpdyn.__version__}"
+
+
+def _subcommands():
+    parser = build_parser()
+    action = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    return parser, action
+
+
+def test_help_lists_every_command_with_defaults_choices_and_exit_statuses(capsys):
+    parser, action = _subcommands()
+    assert main(["--help"]) == 0
+    top = capsys.readouterr().out
+    helps = {c.dest: c.help for c in action._choices_actions}
+    assert set(helps) == set(action.choices) and len(helps) >= 12
+    for name, text in helps.items():
+        assert text and f"{name}" in top and text.split()[0] in top, name
+    for status in ("0 ", "1 ", "2 ", "130", "143"):
+        assert f"  {status}" in top
+    for name, sub in action.choices.items():
+        assert main([name, "--help"]) == 0
+        text = " ".join(capsys.readouterr().out.split())
+        assert "exit status:" in text, name
+        for a in sub._actions:
+            if not a.option_strings or a.help == "==SUPPRESS==" or a.dest == "help":
+                continue
+            if a.default not in (None, False):
+                assert f"(default: {a.default})" in text, (name, a.dest)
+            if a.choices:
+                assert "{" + ",".join(map(str, a.choices)) + "}" in text, (name, a.dest)
+    choices = {a.dest: a.choices for a in action.choices["correct"]._actions}
+    assert choices["method"] == adcpdyn.CORRECTION_METHODS and choices["reference"] == ("bt", "gnss")
+    assert tuple(choices["timing"]) == ("deep", "shallow", "exact")
+    for verb in ("compare", "demo", "diagnose"):
+        assert {a.dest: a.choices for a in action.choices[verb]._actions}["format"] == ("png", "pdf", "svg")
+
+
+def test_exit_statuses(calibrated, tmp_path, capsys, monkeypatch):
+    _, _, m0, _ = calibrated
+    assert main(["scenarios"]) == 0
+    assert main(["info", str(tmp_path / "missing.h5")]) == 2
+    assert main(["correct", str(m0), "--method", "magic", "--out", str(tmp_path / "o.h5")]) == 2
+    assert main(["compare", str(m0), "--format", "gif"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 3 and "--method" in err and "--format" in err
+    from adcpdyn.estimators.calibration_result import CalibrationResult
+
+    monkeypatch.setattr(CalibrationResult, "success", property(lambda self: False))  # a solve that did not converge
+    out = tmp_path / "c.json"
+    assert main(["calibrate", str(m0), "--starts", "1", "--out", str(out)]) == 1
+    assert out.exists()  # written, and it says so
+    assert json.loads(out.read_text())["solver"]["success"] in (True, False)
+
+
+def test_progress_lines_on_stderr_only_when_asked_or_on_a_terminal(calibrated, tmp_path, capfd, monkeypatch):
+    _, _, m0, _ = calibrated
+    monkeypatch.setenv("ADCPDYN_PROGRESS", "1")
+    assert main(["calibrate", str(m0), "--starts", "1", "--out", str(tmp_path / "a.json")]) == 0
+    out, err = capfd.readouterr()
+    lines = [ln for ln in err.splitlines() if ln.startswith("adcpdyn calibrate: [")]
+    assert len(lines) == 2 and "attitude pre-fit" in lines[0] and "solving: 1 start" in lines[1]
+    assert "adcpdyn calibrate: [" not in out  # stdout stays clean for parsing
+    monkeypatch.setenv("ADCPDYN_PROGRESS", "0")
+    assert main(["calibrate", str(m0), "--starts", "1", "--out", str(tmp_path / "b.json")]) == 0
+    assert "adcpdyn calibrate: [" not in capfd.readouterr().err
+
+
+def test_diagnose_progress_names_round_effect_and_time(tmp_path, capfd, monkeypatch):
+    import dataclasses
+
+    from adcpdyn.cases.scenario import get_scenario
+
+    sc = get_scenario("diag_boat")  # as tests/test_diagnosis.py, shortened
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=30.0))
+    path = tmp_path / "d.h5"
+    adcpdyn.simulate(sc, seed=3, out=path)
+    monkeypatch.setenv("ADCPDYN_PROGRESS", "1")
+    code = main(["diagnose", str(path), "--effects", "attitude_latency", "--out", str(tmp_path / "diag.json"),
+                 "--format", "svg"])
+    out, err = capfd.readouterr()
+    assert code in (0, 1)
+    lines = [ln for ln in err.splitlines() if ln.startswith("adcpdyn diagnose: [")]
+    assert "fitting the base model (1 run)" in lines[0]
+    assert any("round 1: fitted attitude_latency" in ln for ln in lines), lines
+    assert lines[-1].split("] ")[1].startswith("done: verdict")
+    assert all(ln[len("adcpdyn diagnose: ["):].split(" s]")[0].strip().replace(".", "").isdigit() for ln in lines)
+    figure = tmp_path / f"{adcpdyn.read_case(path).name}_residuals.svg"
+    assert figure.exists() and b"<svg" in figure.read_bytes()[:2000]
+
+
+# ----------------------------------------------------------------------------------------------- batch
+def test_a_batch_of_one_or_two_cases_runs_in_this_process(calibrated, tmp_path, capsys, monkeypatch):
+    import distributed
+
+    from adcpdyn.batch import resolve_scheduler
+
+    assert [resolve_scheduler("auto", n) for n in (1, 2, 3)] == ["none", "none", "local"]
+    assert resolve_scheduler("local", 1) == "local" and resolve_scheduler("tcp://h:1", 1) == "tcp://h:1"
+    with pytest.raises(ValueError, match="--scheduler"):
+        resolve_scheduler("nowhere", 1)
+
+    def no_cluster(*a, **k):
+        raise AssertionError("a LocalCluster was started for two cases")
+
+    monkeypatch.setattr(distributed, "LocalCluster", no_cluster)
+    _, calib, m0, m1 = calibrated
+    out = tmp_path / "corr"
+    assert main(["correct", str(m0), str(m1), "--method", "adc", "--calibration", str(calib), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "2 cases on scheduler 'none' (auto: in this process for 1-2 cases)" in text
+    assert sorted(p.name for p in out.glob("*.h5")) == ["m0_adc.h5", "m1_adc.h5"]
+    with h5py.File(out / "m1_adc.h5", "r") as f:  # batch outputs carry the same provenance
+        assert json.loads(f["corrected"].attrs["settings"])["calibration_sha256"] == sha256_of(calib)
+
+
+def test_provenance_of_what_the_commands_write_and_the_umask(calibrated, tmp_path):
+    _, _, m0, m1 = calibrated
+    calib = tmp_path / "CALIB.json"
+    old = os.umask(0o027)
+    try:
+        assert main(["calibrate", str(m0), "--starts", "1", "--out", str(calib)]) == 0
+        h5, nc = tmp_path / "m1.h5", tmp_path / "m1.nc"
+        assert main(["correct", str(m1), "--method", "adc", "--calibration", str(calib), "--out", str(h5)]) == 0
+        assert main(["correct", str(m1), "--method", "asc", "--calibration", str(calib), "--out", str(nc)]) == 0
+    finally:
+        os.umask(old)
+    for p in (calib, h5, nc):
+        assert p.stat().st_mode & 0o777 == 0o640, p.name
+    prov = json.loads(calib.read_text())["provenance"]
+    assert prov["adcpdyn_version"] == adcpdyn.__version__ and prov["written_utc"].endswith("Z")
+    assert prov["cases"][0]["name"] == "pool_m0" and prov["cases"][0]["sha256"] == sha256_of(m0)
+    with h5py.File(h5, "r") as f:
+        assert f.attrs["adcpdyn_version"] == adcpdyn.__version__ and "written_utc" in f.attrs
+        g = f["corrected"]
+        assert g.attrs["source_case_sha256"] == sha256_of(m1) and g.attrs["source_case_name"] == "pool_m1"
+        settings = json.loads(g.attrs["settings"])
+    assert settings["calibration_file"] == str(calib) and settings["calibration_sha256"] == sha256_of(calib)
+    assert settings["calibration_provenance"]["cases"][0]["sha256"] == sha256_of(m0)
+    for key in ("heading_misalignment_applied_rad", "magnetic_declination_rad", "moving_bed_velocity_m_s"):
+        assert key in settings, key  # recorded, null when none applied
+    xr = pytest.importorskip("xarray")
+    with xr.open_dataset(nc, engine="h5netcdf") as ds:
+        a = ds.attrs
+        assert a["adcpdyn_version"] == adcpdyn.__version__ and a["source_case"] == "pool_m1"
+        assert a["source_case_sha256"] == sha256_of(m1) and a["calibration_sha256"] == sha256_of(calib)
+        assert a["processing_method"] == "asc"
+        for key in ("heading_misalignment_deg", "magnetic_declination_deg", "moving_bed_velocity_north_east_m_s"):
+            assert key in a, key
+
+
+@pytest.mark.parametrize("fmt, magic", [("pdf", b"%PDF")])
+def test_compare_format_option(calibrated, tmp_path, fmt, magic, capsys):
+    _, calib, _, m1 = calibrated
+    assert main(["compare", str(m1), "--calibration", str(calib), "--out", str(tmp_path), "--format", fmt]) == 0
+    figure = tmp_path / f"pool_m1_compare.{fmt}"
+    assert magic in figure.read_bytes()[:400]
+    assert "against simulated truth" in capsys.readouterr().out
+
+
+def test_demo_writes_its_figures_in_the_format_asked(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--starts", "1", "--scenario", "pool_m1", "--format", "svg", "--out", str(out)]) == 0
+    for name in ("attitude_fit", "radius_vectors", "pool_m1_velocity"):
+        assert b"<svg" in (out / f"{name}.svg").read_bytes()[:2000], name
+    assert not list(out.glob("*.png"))
+    assert "radius_vectors.svg" in capsys.readouterr().out
