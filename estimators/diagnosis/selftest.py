@@ -5,7 +5,8 @@ and score the verdicts.
 Platforms (:data:`PLATFORMS`): the self-test launch with its sensor aligned to the vessel or
 inside a head turned on its mount, the pool boat pushed diagonally, the 13-m survey ship
 (installation yaw 7.4 deg, GNSS), a river transect (compass in the head with a misalignment,
-GNSS); each draw also picks the attitude sampling (the platform's own or 2.5 times slower) and
+GNSS); each draw also picks the attitude sampling (the platform's own, or 2.5 times slower for a
+sensor on its own clock: still four samples per motion period; one sampled per ping stays) and
 the noise colour (white or AR(1) 0.5 on bottom track and GNSS). An effect the base model
 carries on that platform (the base's navigation follows speed changes; an installation the
 base estimates; a sensor in the head sees no installation) is expected to get ``none``.
@@ -57,9 +58,8 @@ def platform_scenario(name: str, slow_attitude: bool, ar1: float) -> Scenario:
     make, duration = PLATFORMS[name]
     sc = make()
     run = sc.run if duration is None else dataclasses.replace(sc.run, duration_s=min(duration, sc.run.duration_s))
-    if slow_attitude:
-        interval = run.attitude_interval_s or run.ping_interval_s
-        run = dataclasses.replace(run, attitude_interval_s=tuple(SLOW_ATTITUDE * np.asarray(interval, dtype=float)))
+    if slow_attitude and run.attitude_interval_s is not None:  # a sensor of its own clock; one sampled per ping stays
+        run = dataclasses.replace(run, attitude_interval_s=tuple(SLOW_ATTITUDE * np.asarray(run.attitude_interval_s, dtype=float)))
     if ar1:
         run = dataclasses.replace(run, noise=dataclasses.replace(run.noise, bt_ar1=ar1, reference_ar1=ar1))
     return dataclasses.replace(sc, run=run)
