@@ -306,7 +306,7 @@ def simulate(scenario, seed: int = 0, *, runs: int | None = None, out=None):
     """
     from .cases.io import write_case
     from .cases.scenario import Scenario, get_scenario
-    from .models.simulator import simulate as _simulate
+    from .cases.simulation import simulate as _simulate
 
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")

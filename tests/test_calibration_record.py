@@ -14,7 +14,7 @@ from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
 from adcpdyn.estimators.calibration_record import CalibrationRecord, calibration_dict
 from adcpdyn.estimators.calibration_result import CalibrationResult
 from adcpdyn.estimators.correct_case import correct_case
-from adcpdyn.models.simulator import simulate
+from adcpdyn.cases.simulation import simulate
 
 
 @pytest.fixture(scope="module")
