@@ -367,6 +367,10 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
                        "oscillation it misses shows as a gap at its frequency")
     if name == "installation_misalignment" and base.spec.installation == "estimate":
         return False, "part of the base: the installation angles are estimated against the moving reference"
+    if name == "installation_misalignment" and base.spec.installation == "head":
+        return False, ("not observable: a sensor inside the head turns with the head, so the beams' attitude does not "
+                       "depend on how the head sits in the vessel (notes on the paper, erratum 5); its heading against "
+                       "the reference is the base's heading misalignment")
     if name == "deep_water_timing" and base.runs[0].timing != "shallow":
         return False, "part of the base: the calibration's two-way timing"
     return True, ""
