@@ -76,6 +76,12 @@ def hat_basis(times, knots) -> np.ndarray:
     return np.column_stack([np.interp(times, knots, eye[:, k]) for k in range(len(knots))])
 
 
+def hat_basis_dm(times, knots) -> ca.DM:
+    """:func:`hat_basis` as a sparse CasADi matrix: each row touches its two knots only, so the
+    residual Jacobian stays sparse in the knot columns (a dense DM keeps its zeros as structure)."""
+    return ca.sparsify(ca.DM(hat_basis(times, knots)))
+
+
 def bt_noise_from_error_velocity(case: Case) -> float:
     """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
     _, e = beam_to_instrument(case.instrument.beam_directions())
@@ -534,7 +540,7 @@ class SurveyModel:
             return None
         if self.bed.shape[0] == 1:
             return ca.repmat(ca.horzcat(self.bed, ca.MX.zeros(1, 1)), n, 1)
-        H = ca.DM(hat_basis(self.runs[k].section_position, np.linspace(0, 1, self.bed.shape[0])))
+        H = hat_basis_dm(self.runs[k].section_position, np.linspace(0, 1, self.bed.shape[0]))
         return ca.horzcat(ca.mtimes(H, self.bed), ca.MX.zeros(n, 1))
 
     def bed_basis(self, k: int) -> np.ndarray:
@@ -580,7 +586,7 @@ class SurveyModel:
             g_depth = centre_of_rotation_depth(case.environment.transducer_depth_m + self.depth_offsets[k], self.r)
             self.g_depth.append(g_depth)
             V = self.knot_syms[k]
-            v_ping = ca.mtimes(ca.DM(hat_basis(pings.time_s, run.knots)), V) if V is not None else ca.MX(ca.DM.zeros(N, 3))
+            v_ping = ca.mtimes(hat_basis_dm(pings.time_s, run.knots), V) if V is not None else ca.MX(ca.DM.zeros(N, 3))
             g_rows, beams, ypr_beams = ca.repmat(g_depth, 1, N), ca.DM(self.beam_dirs_t), self.ypr_beams
             radial_scale = range_scale = 1.0
             for e, th in terms:
@@ -612,7 +618,7 @@ class SurveyModel:
                 t_ref, v_meas = run.reference_time_s, run.reference_velocity_m_s
                 L = t_ref.size
                 dLam = att_c.map(L)(ca.DM(t_ref).T, self._p_rows(k, t_ref))[2]
-                v_model = ca.mtimes(ca.DM(hat_basis(t_ref, run.knots)), V)
+                v_model = ca.mtimes(hat_basis_dm(t_ref, run.knots), V)
                 p_ref = ca.DM(self.reference_point_sensor(case))
                 for e, th in terms:
                     v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)

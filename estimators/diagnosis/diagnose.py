@@ -193,14 +193,14 @@ def _cv_residuals(model, fit, folds: int, block_s: float, fold_of: np.ndarray | 
     fold_of = _folds(model, folds, block_s) if fold_of is None else fold_of
     damping = 1e-6 * np.maximum(np.sum(J**2, axis=0), 1e-12)
     pred = np.zeros_like(e)
+    used = model.mask > 0
+    A_all, b_all = J[used].T @ J[used] + np.diag(damping), J[used].T @ e[used]
     for k in np.unique(fold_of):
         out = fold_of == k
-        tr = ~out & (model.mask > 0)
-        Jt = J[tr]
-        A_inv = np.linalg.inv(Jt.T @ Jt + np.diag(damping))
-        step = -A_inv @ (Jt.T @ e[tr])
-        Jo = J[out]
-        leverage = np.einsum("ij,jk,ik->i", Jo, A_inv, Jo)
+        Jo, Ju = J[out], J[out & used]  # the training rows' normal equations: all used rows minus the fold's
+        A_inv = np.linalg.inv(A_all - Ju.T @ Ju)
+        step = -A_inv @ (b_all - Ju.T @ e[out & used])
+        leverage = np.sum((Jo @ A_inv) * Jo, axis=1)
         pred[out] = (e[out] + Jo @ step) / np.sqrt(1.0 + np.maximum(leverage, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
