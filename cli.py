@@ -552,7 +552,7 @@ def _diagnose_selftest(args) -> int:
     draws = draw_cases(args.selftest, args.seed, config.effects, **({"platforms": platforms} if platforms else {}))
     rows = []
     for label, params, seed, platform, slow, ar1 in tqdm(draws, desc="self-test", unit="case"):
-        rows.append(run_one(label, params, seed, platform, config, slow, ar1))
+        rows.append(run_one(label, params, seed, platform, config, slow, ar1, calibrated=args.selftest_calibrated))
         r = rows[-1]
         tqdm.write(f"{platform:>14s} {r['expected']:>26s} -> {r['verdict']:<34s} gap {r['gap_before']:.3f} -> "
                    f"{r['gap_after']:.3f}  where {r['where_top']}  ({r['seconds']:.0f} s)")
@@ -562,6 +562,7 @@ def _diagnose_selftest(args) -> int:
         with atomic_path(args.out) as tmp:
             with open(tmp, "w") as fh:
                 json.dump(_jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
+                                     "calibrated": args.selftest_calibrated,
                                      "config": {"effects": list(config.effects), "bic_margin": config.bic_margin,
                                                 "min_shrink": config.min_shrink, "gap_z": config.gap_z,
                                                 "min_gap": config.min_gap},
@@ -753,6 +754,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "model follows) or auto")
     s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
+    s.add_argument("--selftest-calibrated", action="store_true",
+                   help="self-test in the paper's workflow: each platform calibrated on an effect-free run of its own, "
+                        "each case diagnosed with that calibration")
     s.add_argument("--platforms", nargs="+", choices=["launch_vessel", "launch_head", "pool", "survey_ship", "river"],
                    help="self-test platforms to draw from (default: all)")
     figure_format(s)

@@ -199,3 +199,24 @@ def test_attitude_latency_is_found_on_the_sensor_samples():
     top = next(s for s in r.ranking if s["effect"] == "attitude_latency")
     est, se = top["params"]["attitude_latency.delay_s"], top["params_se"]["attitude_latency.delay_s"]
     assert abs(est - 0.3) < max(4 * se, 0.03)
+
+
+def test_calibrated_selftest_diagnoses_with_the_platforms_own_calibration(monkeypatch):
+    """The paper's workflow in the self-test: the calibration comes from another, effect-free run
+    (another name, so none of its run-specific numbers is pinned) and is the diagnosis' base."""
+    from adcpdyn.estimators.diagnosis import selftest
+
+    seen = {}
+    real_diagnose = selftest.diagnose
+
+    def spy(case, config, calibration=None):
+        seen["calibration"], seen["case"] = calibration, case.name
+        return real_diagnose(case, config, calibration=calibration)
+
+    monkeypatch.setattr(selftest, "diagnose", spy)
+    config = DiagnosisConfig(effects=("heave", "sound_speed_error"))
+    params = get_effect("heave").draw(np.random.default_rng(3))
+    row = selftest.run_one("heave", params, 5, "pool", config, calibrated=True)
+    assert row["calibrated"] and seen["calibration"] is not None
+    assert [r["case"] for r in seen["calibration"]["runs"]] == [seen["case"] + "_calibration"]
+    assert row["verdict"] == "heave"

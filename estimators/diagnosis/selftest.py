@@ -98,13 +98,28 @@ def oracle_shrink(result, label: str, params: dict, config: DiagnosisConfig) -> 
     return (result.gap_before - gap) / result.gap_before if result.gap_before > 0 else None
 
 
+CALIBRATION_STARTS = 8  # multistart of the calibrated self-test's calibration runs
+
+
+def calibration_of(platform: str, slow_attitude: bool, ar1: float, sim_seed: int) -> dict:
+    """The paper's workflow: the platform calibrated on an effect-free run of its own (another
+    noise seed, another case name, so no run-specific number of it is pinned in the diagnosis)."""
+    from ..calibration import CalibrationConfig, calibrate
+
+    case = simulate(platform_scenario(platform, slow_attitude, ar1), seed=(sim_seed + 7919) % (2**31 - 1))
+    case = dataclasses.replace(case, name=case.name + "_calibration", truth=None)
+    return calibrate(case, CalibrationConfig(n_starts=CALIBRATION_STARTS)).to_dict()
+
+
 def run_one(label: str, params: dict, sim_seed: int, platform: str, config: DiagnosisConfig,
-            slow_attitude: bool = False, ar1: float = 0.0) -> dict:
-    """Simulate, diagnose blind, then (only afterwards) compare with what was injected."""
+            slow_attitude: bool = False, ar1: float = 0.0, calibrated: bool = False) -> dict:
+    """Simulate, diagnose blind, then (only afterwards) compare with what was injected. With
+    ``calibrated`` the base is the calibration of an effect-free run of the same platform."""
     case = simulate(with_effect(platform_scenario(platform, slow_attitude, ar1), label, params), seed=sim_seed)
     case = dataclasses.replace(case, truth=dataclasses.replace(case.truth, effects=[]))  # blind
+    calibration = calibration_of(platform, slow_attitude, ar1, sim_seed) if calibrated else None
     t0 = time.perf_counter()
-    r = diagnose(case, config)
+    r = diagnose(case, config, calibration=calibration)
     seconds = time.perf_counter() - t0
     absorbed = label in r.base["skipped_effects"]
     expected = NONE if absorbed else label
@@ -114,6 +129,7 @@ def run_one(label: str, params: dict, sim_seed: int, platform: str, config: Diag
     visible = bool(r.gap_before > config.min_gap and r.gap_z_before > config.gap_z)  # the base shows a gap to explain
     return {"truth": label, "expected": expected, "visible": visible, "absorbed_by_base": r.base["skipped_effects"].get(label) if absorbed else None,
             "params": params, "seed": sim_seed, "platform": platform, "slow_attitude": slow_attitude, "ar1": ar1,
+            "calibrated": calibrated,
             "attitude_source": r.base["attitude_source"], "verdict": r.verdict, "correct": first == expected,
             "gap_before": r.gap_before, "gap_after": r.gap_after,
             "remaining_gap_significant": r.remaining_gap_significant,
