@@ -217,6 +217,7 @@ class RunSetup:
     attitude_reason: str = ""
     section_position: np.ndarray | None = None
     sample_shift_s: float = 0.0  # rows take the samples' segment about t + shift (a latency's current estimate)
+    sample_tilt_lead_s: float = 0.0  # and their tilts low-pass-inverted with this tau (a tilt low-pass' current estimate)
     samples: SampledAttitude | None = field(default=None, init=False)
 
     def __post_init__(self):
@@ -508,7 +509,7 @@ class SurveyModel:
         ypr = p[1:4] + p[4:7] * (tq - p[0])
         tilt = ypr[1:3]
         for (e, _), th in zip(terms, ths):
-            tilt = e.sampled_tilt(tilt, p[5:7], th)
+            tilt = e.sampled_tilt(tilt, p[5:7], th, lead=run.sample_tilt_lead_s)
         ypr_s = ca.vertcat(ypr[0], tilt)
         Lam_s = euler_matrix(ypr_s[0], ypr_s[1], ypr_s[2])
         dLam_s = ca.reshape(ca.jacobian(ca.vec(Lam_s), t), 3, 3)
@@ -530,7 +531,7 @@ class SurveyModel:
         extra = ([self.heading] if self.heading is not None else []) + [th for _, th in self._sample_terms(k)]
         if run.attitude_source == "samples":
             # the segment about t + shift (its own clock: a latency th then evaluates it at t + th)
-            p = ca.MX(ca.DM(run.samples.params_at(np.asarray(times) + run.sample_shift_s)))
+            p = ca.MX(ca.DM(run.samples.params_at(np.asarray(times) + run.sample_shift_s, run.sample_tilt_lead_s)))
             return ca.vertcat(p, *[ca.repmat(x, 1, len(times)) for x in extra]) if extra else p
         return ca.vertcat(self.attitude_params[k], *extra)
 

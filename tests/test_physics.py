@@ -333,3 +333,25 @@ def test_heading_correction_is_a_yaw_offset_and_turns_the_rotation():
     w, w_s = np.asarray(out[4]).ravel(), np.asarray(sensor[4]).ravel()
     Rz = np.array([[np.cos(delta), -np.sin(delta), 0], [np.sin(delta), np.cos(delta), 0], [0, 0, 1]])
     assert np.allclose(w, Rz @ w_s, atol=1e-14)
+
+
+def test_sampled_tilt_lead_inverts_a_first_order_lowpass_in_closed_form():
+    """params_at(t, tau): pitch and roll x = y + tau y', rates x' = y' + tau y'' (y = A sin wt),
+    heading untouched; the linear interpolation adds tau times the segment slope."""
+    from adcpdyn.models.motion import SampledAttitude
+
+    w, A, tau = 1.3, 0.05, 0.3
+    t = np.arange(0.0, 60.0, 0.05)
+    ypr = np.column_stack([0.2 * np.ones_like(t), A * np.sin(w * t), -A * np.sin(w * t)])
+    s = SampledAttitude(t, ypr, band_rad_s=2 * w)
+    tq = np.linspace(20.0, 40.0, 57)
+    p0, p = s.params_at(tq), s.params_at(tq, tilt_lead_s=tau)
+    x = A * (np.sin(w * tq) + tau * w * np.cos(w * tq))
+    xdot = A * (w * np.cos(w * tq) - tau * w**2 * np.sin(w * tq))
+    np.testing.assert_allclose(p[2], x, atol=1e-3 * A)  # the smoothing keeps 99.9 % at w
+    np.testing.assert_allclose(p[3], -x, atol=1e-3 * A)  # the smoothing keeps 99.9 % at w
+    np.testing.assert_allclose(p[5], xdot, atol=3e-3 * A * w)
+    np.testing.assert_allclose(p[[0, 1, 4]], p0[[0, 1, 4]])
+    lin = SampledAttitude(t, ypr, "linear")
+    q0, q = lin.params_at(tq), lin.params_at(tq, tilt_lead_s=tau)
+    np.testing.assert_allclose(q[2:4], q0[2:4] + tau * q0[5:7])

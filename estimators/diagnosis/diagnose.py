@@ -492,8 +492,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             f = model.solve(x0, start_fit.sigma, fixed=pinned)
             if best is None or f.objective < best.objective:
                 best = f
-        if base.sampled and any(t.effect.name == "attitude_latency" for t in terms):
-            model, best = _latency_on_samples(base, terms, peaks, config, model, best, pinned)
+        if base.sampled and any(f"{t.effect.name}.{p}" in SAMPLE_FIXED_POINTS for t in terms for p in t.effect.names):
+            model, best = _on_samples(base, terms, peaks, config, model, best, pinned)
         return model, best
 
     # round 1: every candidate against the base (the ranking); later rounds: on top of the chosen ones
@@ -610,19 +610,22 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
 
 
 LATENCY_ITERATIONS = 3
+SAMPLE_FIXED_POINTS = {"attitude_latency.delay_s": "sample_shift_s", "tilt_lowpass.tau_s": "sample_tilt_lead_s"}
 
 
-def _latency_on_samples(base, terms, peaks, config, model, fit, pinned):
-    """A latency on the sensor's samples: each row's sample segment is taken about t + the current
-    delay estimate and the fit repeated, so the delay is a shift within the samples, not an
-    extrapolation of one segment (a fixed point: exact linear interpolation at t + delay)."""
-    name = next(n for n in model.names if n.endswith("attitude_latency.delay_s"))
+def _on_samples(base, terms, peaks, config, model, fit, pinned):
+    """Sensor effects undone within the samples: each row's sample segment is taken about
+    t + the current latency estimate, its tilts low-pass-inverted with the current tau (angle and
+    rate from the spline: x = y + tau y', x' = y' + tau y''), and the fit repeated to a fixed
+    point, so neither is an extrapolation of one segment's straight line."""
+    names = {field: next(n for n in model.names if n.endswith(key)) for key, field in SAMPLE_FIXED_POINTS.items()
+             if any(n.endswith(key) for n in model.names)}
     for _ in range(LATENCY_ITERATIONS):
-        delay = float(fit.x[model.names.index(name)])
-        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, sample_shift_s=delay) for r in base.runs])
+        values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
+        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])
         model = GapModel(shifted, terms, peaks, solver=config.solver)
         new = model.solve(model.start(dict(zip(fit.names, fit.x))), fit.sigma, fixed=pinned)
-        moved = abs(float(new.x[model.names.index(name)]) - delay)
+        moved = max(abs(float(new.x[model.names.index(n)]) - values[field]) for field, n in names.items())
         fit = new
         if moved < 1e-3:
             break

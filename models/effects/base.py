@@ -179,8 +179,9 @@ class Effect:
         """The time whose reading holds the true attitude at t."""
         return t
 
-    def sampled_tilt(self, tilt, tilt_rate, th):
-        """True pitch and roll (2,) from the read ones and their rates."""
+    def sampled_tilt(self, tilt, tilt_rate, th, lead: float = 0.0):
+        """True pitch and roll (2,) from the read ones and their rates (``lead``: a low-pass
+        inversion already applied to the samples' rows, see :class:`SampledAttitude.params_at`)."""
         return tilt
 
     def sampled_heading_correction(self, psi, th):

@@ -56,8 +56,10 @@ class TiltLowpass(Effect):
                 parts[base + 2 * k + 1] = (c * b + sn * a) / den
         return ca.vertcat(*parts)
 
-    def sampled_tilt(self, tilt, tilt_rate, th):
-        return tilt + th[0] * tilt_rate  # inverse of tau dy/dt + y = x
+    def sampled_tilt(self, tilt, tilt_rate, th, lead: float = 0.0):
+        # inverse of tau dy/dt + y = x; the rows' samples hold it for tau = lead already (with the
+        # rate's own correction tau y'', which this first-order step lacks: a fixed point in the diagnosis)
+        return tilt + (th[0] - lead) * tilt_rate
 
     def extra_starts(self):
         return [{"tilt_lowpass.tau_s": 0.3}]
