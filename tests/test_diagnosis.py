@@ -220,3 +220,13 @@ def test_calibrated_selftest_diagnoses_with_the_platforms_own_calibration(monkey
     assert row["calibrated"] and seen["calibration"] is not None
     assert [r["case"] for r in seen["calibration"]["runs"]] == [seen["case"] + "_calibration"]
     assert row["verdict"] == "heave"
+
+
+def test_moving_bed_is_named_on_a_run_known_to_stay_put():
+    """Without a moving reference a bed velocity is vessel motion, unless the run is declared
+    stationary (the pool): then the bottom track's steady offset is the bed's."""
+    from adcpdyn.estimators.diagnosis.selftest import run_one
+
+    params = {"velocity_north_m_s": 0.08, "velocity_east_m_s": -0.2}
+    row = run_one("moving_bed", params, 5, "pool", DiagnosisConfig(effects=("moving_bed", "heave", "sound_speed_error")))
+    assert row["expected"] == "moving_bed" and row["verdict"] == "moving_bed"

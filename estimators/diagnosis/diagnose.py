@@ -356,10 +356,11 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
     if base.sampled and e.needs_motion_model:
         return False, "acts on the motion model only; the beams use the sensor's samples (which hold it already)"
     moving = any(r.moving_reference for r in base.runs)
-    if e.needs_reference and not moving:
-        return False, "needs a moving reference velocity"
-    if name == "moving_bed" and not moving:
+    stationary = all(r.knots is None for r in base.runs)  # the vessel is known to stay put
+    if name == "moving_bed" and not moving and not stationary:
         return False, "a moving bed is indistinguishable from vessel motion without a reference"
+    if e.needs_reference and not moving and not (name == "moving_bed" and stationary):
+        return False, "needs a moving reference velocity"
     if name == "surge":
         return False, "part of the base: its navigation (piecewise-linear velocity through the reference or bottom track) follows speed changes"
     if name == "forced_roll":
