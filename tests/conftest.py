@@ -91,3 +91,56 @@ def imported():
         return cache[name]
 
     return get
+
+
+def assert_provenance(calib, h5, nc, m0, m1, m0_path=None) -> None:
+    """CALIB.json, a corrected HDF5 and a netCDF written under umask 027 from pool_m0 / pool_m1
+    record the version, the source cases and their SHA-256, and the calibration applied."""
+    import json
+
+    import h5py
+
+    import adcpdyn
+    from adcpdyn.cases.hashing import sha256_of
+
+    for p in (calib, h5, nc):
+        assert p.stat().st_mode & 0o777 == 0o640, p.name  # the umask's permissions, not 0600
+    prov = json.loads(calib.read_text())["provenance"]
+    assert prov["adcpdyn_version"] == adcpdyn.__version__ and prov["written_utc"].endswith("Z")
+    assert prov["cases"][0]["name"] == "pool_m0" and prov["cases"][0]["sha256"] == sha256_of(m0)
+    if m0_path is not None:
+        assert prov["cases"][0]["path"] == str(m0_path)
+    with h5py.File(h5, "r") as f:
+        assert f.attrs["adcpdyn_version"] == adcpdyn.__version__ and "written_utc" in f.attrs
+        g = f["corrected"]
+        assert g.attrs["source_case_sha256"] == sha256_of(m1) and g.attrs["source_case_name"] == "pool_m1"
+        settings = json.loads(g.attrs["settings"])
+    assert settings["calibration_file"] == str(calib) and settings["calibration_sha256"] == sha256_of(calib)
+    assert settings["calibration_provenance"]["cases"][0]["sha256"] == sha256_of(m0)
+    for key in ("heading_misalignment_applied_rad", "magnetic_declination_rad", "moving_bed_velocity_m_s"):
+        assert key in settings, key  # recorded, null when none applied
+    xr = pytest.importorskip("xarray")
+    with xr.open_dataset(nc, engine="h5netcdf") as ds:
+        a = ds.attrs
+        assert a["adcpdyn_version"] == adcpdyn.__version__ and a["source_case"] == "pool_m1"
+        assert a["source_case_sha256"] == sha256_of(m1) and a["calibration_sha256"] == sha256_of(calib)
+        assert a["processing_method"] == "asc"
+        for key in ("heading_misalignment_deg", "magnetic_declination_deg", "moving_bed_velocity_north_east_m_s"):
+            assert key in a, key
+
+
+def calibrated_pool_m0(folder, n_starts: int):
+    """pool_m0 (seed 1) calibrated with ``n_starts`` starts and its CALIB.json in ``folder``."""
+    import warnings
+
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
+
+    m0 = simulate(get_scenario("pool_m0"), seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = CalibrationProblem(m0, CalibrationConfig(n_starts=n_starts)).solve()
+    path = folder / "CALIB.json"
+    result.to_json(path)
+    return result, path, m0

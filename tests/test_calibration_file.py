@@ -4,28 +4,20 @@ from __future__ import annotations
 
 import copy
 import json
-import warnings
 
 import numpy as np
 import pytest
 
-from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
-from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
 from adcpdyn.estimators.calibration_file import KEYS, lever_arms, read_calibration, validate_calibration
-from adcpdyn.cases.simulation import simulate
+from conftest import calibrated_pool_m0
 
 
 @pytest.fixture(scope="module")
 def written(tmp_path_factory):
     """What `adcpdyn calibrate` writes (pool_m0, one start) and a case to correct with it."""
     folder = tmp_path_factory.mktemp("calib")
-    case = simulate(get_scenario("pool_m0"), seed=1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        result = CalibrationProblem(case, CalibrationConfig(n_starts=1)).solve()
-    path = folder / "calib.json"
-    result.to_json(path)
+    _, path, _ = calibrated_pool_m0(folder, n_starts=1)
     m1 = folder / "m1.h5"
     assert main(["simulate", "pool_m1", "--seed", "1", "--out", str(m1)]) == 0
     return json.loads(path.read_text()), m1

@@ -4,29 +4,22 @@ calibration is handed over in, and CALIB.json's provenance."""
 from __future__ import annotations
 
 import json
-import warnings
 
 import numpy as np
 import pytest
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
 from adcpdyn.estimators.calibration_record import CalibrationRecord, calibration_dict
 from adcpdyn.estimators.calibration_result import CalibrationResult
 from adcpdyn.estimators.correct_case import correct_case
 from adcpdyn.cases.simulation import simulate
+from conftest import calibrated_pool_m0
 
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory):
     """pool_m0 calibrated (2 starts), its CALIB.json, and pool_m1 to correct."""
-    folder = tmp_path_factory.mktemp("record")
-    m0 = simulate(get_scenario("pool_m0"), seed=1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        result = CalibrationProblem(m0, CalibrationConfig(n_starts=2)).solve()
-    path = folder / "CALIB.json"
-    result.to_json(path)
+    result, path, _ = calibrated_pool_m0(tmp_path_factory.mktemp("record"), n_starts=2)
     return result, path, simulate(get_scenario("pool_m1"), seed=1)
 
 

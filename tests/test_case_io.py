@@ -22,6 +22,7 @@ from adcpdyn.cases.case import (
     Water,
 )
 from adcpdyn.cases.io import CaseFormatError, read_case, validate_case, write_case
+from fuzzlib import _del, _del_attr, _replace, _set_attr  # the malformed files' edits, one copy
 
 N, M, K, L = 20, 15, 3, 10
 
@@ -161,32 +162,6 @@ def test_unknown_groups_and_attrs_ignored(case, case_file):
     back = read_case(case_file)
     assert_same(case.replace(truth=None), back.replace(truth=None))
     assert back.truth.extra_attrs == {"seed": "1", "simulator": "hand", "scale": "[1.0, 2.0]"}
-
-
-def _del(path):
-    def edit(f):
-        del f[path]
-    return edit
-
-
-def _del_attr(group, name):
-    def edit(f):
-        del f[group].attrs[name]
-    return edit
-
-
-def _set_attr(group, name, value):
-    def edit(f):
-        f[group].attrs[name] = value
-    return edit
-
-
-def _replace(path, fn):
-    def edit(f):
-        data = fn(f[path][()])
-        del f[path]
-        f[path] = data
-    return edit
 
 
 def _set_item(index, value):

@@ -13,6 +13,7 @@ import pytest
 
 import adcpdyn
 from adcpdyn.cases.hashing import sha256_of
+from conftest import assert_provenance
 from adcpdyn.cli import build_parser, main
 
 
@@ -155,28 +156,7 @@ def test_provenance_of_what_the_commands_write_and_the_umask(calibrated, tmp_pat
         assert main(["correct", str(m1), "--method", "asc", "--calibration", str(calib), "--out", str(nc)]) == 0
     finally:
         os.umask(old)
-    for p in (calib, h5, nc):
-        assert p.stat().st_mode & 0o777 == 0o640, p.name
-    prov = json.loads(calib.read_text())["provenance"]
-    assert prov["adcpdyn_version"] == adcpdyn.__version__ and prov["written_utc"].endswith("Z")
-    assert prov["cases"][0]["name"] == "pool_m0" and prov["cases"][0]["sha256"] == sha256_of(m0)
-    with h5py.File(h5, "r") as f:
-        assert f.attrs["adcpdyn_version"] == adcpdyn.__version__ and "written_utc" in f.attrs
-        g = f["corrected"]
-        assert g.attrs["source_case_sha256"] == sha256_of(m1) and g.attrs["source_case_name"] == "pool_m1"
-        settings = json.loads(g.attrs["settings"])
-    assert settings["calibration_file"] == str(calib) and settings["calibration_sha256"] == sha256_of(calib)
-    assert settings["calibration_provenance"]["cases"][0]["sha256"] == sha256_of(m0)
-    for key in ("heading_misalignment_applied_rad", "magnetic_declination_rad", "moving_bed_velocity_m_s"):
-        assert key in settings, key  # recorded, null when none applied
-    xr = pytest.importorskip("xarray")
-    with xr.open_dataset(nc, engine="h5netcdf") as ds:
-        a = ds.attrs
-        assert a["adcpdyn_version"] == adcpdyn.__version__ and a["source_case"] == "pool_m1"
-        assert a["source_case_sha256"] == sha256_of(m1) and a["calibration_sha256"] == sha256_of(calib)
-        assert a["processing_method"] == "asc"
-        for key in ("heading_misalignment_deg", "magnetic_declination_deg", "moving_bed_velocity_north_east_m_s"):
-            assert key in a, key
+    assert_provenance(calib, h5, nc, m0, m1)
 
 
 @pytest.mark.parametrize("fmt, magic", [("pdf", b"%PDF")])
