@@ -230,3 +230,23 @@ def test_moving_bed_is_named_on_a_run_known_to_stay_put():
     params = {"velocity_north_m_s": 0.08, "velocity_east_m_s": -0.2}
     row = run_one("moving_bed", params, 5, "pool", DiagnosisConfig(effects=("moving_bed", "heave", "sound_speed_error")))
     assert row["expected"] == "moving_bed" and row["verdict"] == "moving_bed"
+
+
+def test_a_nearly_as_good_effect_is_named_beside_the_chosen_one(monkeypatch):
+    """Tilt low-pass on the pool boat: latency removes about three quarters of what the tilt
+    low-pass removes. Named as an alternative when that share passes the bar, not otherwise."""
+    import importlib
+
+    dmod = importlib.import_module("adcpdyn.estimators.diagnosis.diagnose")  # the module, not the function
+
+    case = simulate(with_effect(get_scenario("pool_diag"), "tilt_lowpass", {"tau_s": 0.3}), seed=3)
+    config = DiagnosisConfig(effects=("tilt_lowpass", "attitude_latency"), max_effects=1)
+    strict = diagnose(case, config)
+    assert strict.verdict == "tilt_lowpass" and strict.alternatives == []
+    monkeypatch.setattr(dmod, "ALTERNATIVE_SHARE", 0.5)
+    loose = diagnose(case, config)
+    assert loose.verdict == "tilt_lowpass"
+    (alt,) = loose.alternatives
+    assert [a["effect"] for a in alt["alternatives"]] == ["attitude_latency"]
+    assert 0.5 * alt["shrink"] <= alt["alternatives"][0]["shrink"] < 0.8 * alt["shrink"]
+    assert "attitude_latency explains nearly as much as tilt_lowpass" in loose.statement

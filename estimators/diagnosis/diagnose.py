@@ -131,6 +131,7 @@ class DiagnosisResult:
     velocity_error_after_m_s: float | None
     selected: list = field(default_factory=list)
     confounded: list = field(default_factory=list)
+    alternatives: list = field(default_factory=list)  # per chosen effect: the others of its round nearly as good
     runs: list = field(default_factory=list)
     run_holdout: dict = field(default_factory=dict)
     fits: dict = field(default_factory=dict, repr=False)  # name -> (GapModel, Fit), for figures
@@ -500,7 +501,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     # round 1: every candidate against the base (the ranking); later rounds: on top of the chosen ones
     noise = dict(sigma_fit)
     n_obs = int((base_model.mask > 0).sum())
-    selected_terms, selected, confounded, ranking = [], [], [], []
+    selected_terms, selected, confounded, ranking, alternatives = [], [], [], [], []
     current_name, current = "base", (base_model, base_fit)
     cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
     for round_ in range(1, config.max_effects + 1):
@@ -542,6 +543,13 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
         best = next((s for s in scores if s.significant), None)
         if best is None:
             break
+        close = [s for s in scores if s is not best and s.significant
+                 and s.shrink_fraction >= ALTERNATIVE_SHARE * best.shrink_fraction]
+        if close:
+            alternatives.append({"chosen": best.effect, "round": round_, "shrink": best.shrink_fraction,
+                                 "delta_bic": best.delta_bic,
+                                 "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic}
+                                                  for s in close]})
         selected.append(best.effect)
         selected_terms += _terms(base, best.effect)
         current_name = tried[best.effect][0]
@@ -580,6 +588,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
                           f"{', '.join(c['with'])}: its value carries that ({c['statement']})")
         else:
             statement += f"; {c['effect']} improves the fit but cannot be separated here: {c['statement']}"
+    for a in alternatives:
+        statement += (f"; {' and '.join(x['effect'] for x in a['alternatives'])} explain"
+                      f"{'s' if len(a['alternatives']) == 1 else ''} nearly as much as {a['chosen']} ("
+                      + ", ".join(f"shrink {100 * x['shrink']:.0f}%" for x in a["alternatives"])
+                      + f" vs {100 * a['shrink']:.0f}%): these data hardly tell them apart, so read "
+                      f"{a['chosen']} as the likeliest of them, not as proven")
     if base.sampled:
         reasons = "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs if r.attitude_source == "samples"))
         statement = ("beams' attitude from the sensor's samples (" + reasons + "): effects on the sensor are undone on "
@@ -607,10 +621,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
         remaining_gap_significant=bool(remaining), where=where, ranking=[r.to_dict() for r in ranking],
         noise={_key_name(base_model, k): v for k, v in noise.items()}, base=base_info,
         velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, confounded=confounded,
+        alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
 
 
 LATENCY_ITERATIONS = 3
+ALTERNATIVE_SHARE = 0.8  # a significant effect removing this share of the chosen one's shrink is named beside it
 SAMPLE_FIXED_POINTS = {"attitude_latency.delay_s": "sample_shift_s", "tilt_lowpass.tau_s": "sample_tilt_lead_s"}
 
 
