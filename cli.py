@@ -522,7 +522,8 @@ def cmd_diagnose(args) -> int:
     from .estimators.diagnosis.report import table, write_report
 
     if is_many(args.case) and not args.joint:
-        raise ValueError("diagnose: several cases: add --joint to diagnose them together (one boat, shared and per-run effects)")
+        raise ValueError(f"diagnose: {' '.join(args.case)}: several cases (a folder, a glob or more than one file): add "
+                         "--joint to diagnose them together (one boat, shared and per-run effects)")
     paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
     check_output_file(args.out, *paths, args.calibration)
     progress = _DiagnosisProgress("diagnose", len(paths))
