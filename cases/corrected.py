@@ -48,7 +48,7 @@ def write_correction(correction, path, source_case: str = "") -> None:
     from pathlib import Path
 
     from .hashing import sha256_of
-    from .netcdf import adcpdyn_version
+    from .hashing import adcpdyn_version
 
     sha = correction.attrs.get("source_case_sha256") or (
         sha256_of(source_case) if source_case and Path(source_case).is_file() else "not available (no case file)")

@@ -32,7 +32,7 @@ import h5py
 import numpy as np
 
 from .case import Case, parse_utc
-from .hashing import sha256_of
+from .hashing import adcpdyn_version, sha256_of
 from .importers.rdi_frames import CASE_FROM_RDI_BEAM
 
 CONVENTIONS = "CF-1.8"
@@ -41,16 +41,6 @@ NOT_DETERMINED = "not determined"
 
 
 # ----------------------------------------------------------------------------------------------- helpers
-def adcpdyn_version() -> str:
-    """The installed adcpdyn's version (``importlib.metadata``), or ``unknown``."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("adcpdyn")
-    except PackageNotFoundError:
-        return "unknown"
-
-
 def read_provenance(path) -> dict:
     """The ``/provenance`` attributes of a case file (an imported one), as Python values; {} when absent."""
     out = {}

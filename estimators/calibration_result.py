@@ -274,7 +274,7 @@ class CalibrationResult:
 
 def provenance_block(result) -> dict:
     """CALIB.json's ``provenance``: the adcpdyn version and what the result says it came from."""
-    from ..cases.netcdf import adcpdyn_version
+    from ..cases.hashing import adcpdyn_version
 
     cases = result.provenance.get("cases") or [{"name": r.case} for r in result.runs]
     return jsonable({"adcpdyn_version": adcpdyn_version(), **result.provenance, "cases": cases})

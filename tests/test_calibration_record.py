@@ -62,7 +62,7 @@ def test_from_json_round_trip(calibrated):
 
 def test_calibration_json_records_its_provenance(calibrated):
     result, path, _ = calibrated
-    from adcpdyn.cases.netcdf import adcpdyn_version
+    from adcpdyn.cases.hashing import adcpdyn_version
 
     prov = json.loads(path.read_text())["provenance"]
     assert prov["adcpdyn_version"] == adcpdyn_version() and prov["written_utc"].endswith("Z")
