@@ -250,3 +250,13 @@ def test_a_nearly_as_good_effect_is_named_beside_the_chosen_one(monkeypatch):
     assert [a["effect"] for a in alt["alternatives"]] == ["attitude_latency"]
     assert 0.5 * alt["shrink"] <= alt["alternatives"][0]["shrink"] < 0.8 * alt["shrink"]
     assert "attitude_latency explains nearly as much as tilt_lowpass" in loose.statement
+
+
+def test_candidates_refitted_in_threads_give_the_same_report():
+    """A round's candidates are refitted in threads; the report does not depend on it."""
+    case = simulate(with_effect(get_scenario("pool_diag"), "heave", {"omega_rad_s": 1.3, "cos_m": 0.08, "sin_m": -0.05}), seed=4)
+    effects = ("heave", "sound_speed_error", "attitude_latency")
+    one, two = (diagnose(case, DiagnosisConfig(effects=effects, workers=w)) for w in (1, 2))
+    assert one.verdict == two.verdict and one.statement == two.statement
+    assert [(r["effect"], r["delta_bic"], r["params"]) for r in one.ranking] == \
+           [(r["effect"], r["delta_bic"], r["params"]) for r in two.ranking]

@@ -25,6 +25,8 @@ misses, which catalog effects explain it, and how far the held-out gap shrinks.
 from __future__ import annotations
 
 import dataclasses
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -71,6 +73,7 @@ class DiagnosisConfig:
     max_effects: int = 3
     confounded_share: float = 0.9
     attitude: str = "auto"  # beams' attitude: model | samples | auto (as the calibration chooses)
+    workers: int = min(2, os.cpu_count() or 1)  # threads refitting a round's candidates at once
     solver: SolverOptions = SolverOptions(tol=1e-6, max_iter=200, hessian="gauss-newton", expand=False, mu_init=1e-5)
 
     def __post_init__(self):
@@ -506,15 +509,21 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
     for round_ in range(1, config.max_effects + 1):
         tried = {}
-        for name in candidates:
-            if name in selected:
-                continue
-            model, f = refit(selected_terms, name, current[1])
+        todo = [name for name in candidates if name not in selected]
+
+        def one(name, terms=tuple(selected_terms), start=current[1]):
+            model, f = refit(list(terms), name, start)
+            if progress:
+                progress(name if round_ == 1 else "+".join(selected + [name]))
+            return model, f
+
+        # the candidates' refits are independent: threads (CasADi computes without the GIL)
+        with ThreadPoolExecutor(max_workers=max(1, min(config.workers, len(todo)))) as pool:
+            done = list(pool.map(one, todo))
+        for name, (model, f) in zip(todo, done):
             label = name if round_ == 1 else "+".join(selected + [name])
             tried[name] = (label, model, f)
             fits[label] = (model, f)
-            if progress:
-                progress(label)
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
             for model, f in [v[1:] for v in tried.values()] + [(base_model, base_fit)]:
                 for key, value in _group_sigma(model, f.raw).items():
