@@ -70,18 +70,30 @@ def _reference_velocity() -> ca.Function:
 REFERENCE_VELOCITY = _reference_velocity()  # (v_a, dLambda/dt, body point in the sensor frame) -> its velocity
 
 
+def hat_basis_sparse(times, knots) -> sp.csr_matrix:
+    """Piecewise-linear interpolation weights, (len(times), len(knots)), constant beyond the ends:
+    each time's two knots only (np.interp's arithmetic), never an (N, K) dense array."""
+    knots = np.asarray(knots, dtype=float)
+    t = np.clip(np.asarray(times, dtype=float).reshape(-1), knots[0], knots[-1])
+    j = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, knots.size - 2)
+    a = (1.0 / (knots[j + 1] - knots[j])) * (t - knots[j])
+    rows = np.repeat(np.arange(t.size), 2)
+    H = sp.csr_matrix((np.column_stack([1.0 - a, a]).ravel(), (rows, np.column_stack([j, j + 1]).ravel())),
+                      shape=(t.size, knots.size))
+    H.eliminate_zeros()  # a time on a knot touches that knot alone
+    return H
+
+
 def hat_basis(times, knots) -> np.ndarray:
-    """Piecewise-linear interpolation weights, (len(times), len(knots)); constant beyond the ends."""
-    eye = np.eye(len(knots))
-    return np.column_stack([np.interp(times, knots, eye[:, k]) for k in range(len(knots))])
+    """:func:`hat_basis_sparse` as a dense array (for a few knots, e.g. the bed's)."""
+    return hat_basis_sparse(times, knots).toarray()
 
 
 def hat_basis_dm(times, knots) -> ca.DM:
-    """:func:`hat_basis` as a sparse CasADi matrix: each row touches its two knots only, so the
-    residual Jacobian stays sparse in the knot columns (a dense DM keeps its zeros as structure)."""
-    return ca.sparsify(ca.DM(hat_basis(times, knots)))
-
-
+    """:func:`hat_basis_sparse` as a CasADi matrix of the same sparsity, so the residual Jacobian
+    stays sparse in the knot columns (a dense DM keeps its zeros as structure)."""
+    H = hat_basis_sparse(times, knots).tocsc()
+    return ca.DM(ca.Sparsity(H.shape[0], H.shape[1], H.indptr.tolist(), H.indices.tolist()), H.data)
 def bt_noise_from_error_velocity(case: Case) -> float:
     """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
     _, e = beam_to_instrument(case.instrument.beam_directions())
@@ -740,7 +752,7 @@ class SurveyModel:
             n_local = LOCAL_ATTITUDE_SIZE if sampled else 0
             local = run.samples.params_at if sampled else (lambda t: np.zeros((0, np.size(t))))
             knots_cols = None if run.knots is None else u.index(f"velocity{k}").reshape(-1, 3)
-            basis = (lambda t, run=run: None if run.knots is None else sp.csr_matrix(hat_basis(t, run.knots)))
+            basis = (lambda t, run=run: None if run.knots is None else hat_basis_sparse(t, run.knots))
             v = ca.SX.sym("v", 3)
             if run.attitude_source == "model":
                 att = self.attitude_sensor[k]

@@ -149,3 +149,21 @@ def test_newey_west_recovers_the_long_run_variance_of_an_ar1_mean():
     assert sw.cov[0, 0] == pytest.approx(theory, rel=0.2)
     assert sw.cov[0, 0] > 4 * white
     assert 0.7 < sw.rho[0] < 0.9
+
+
+def test_hat_basis_is_np_interp_of_the_unit_vectors_and_two_knots_per_row():
+    """The navigation's interpolation weights, built sparse, equal np.interp of each knot's unit
+    vector (held beyond the ends, one knot alone on a knot), in every form the models take."""
+    import casadi as ca
+
+    from adcpdyn.estimators.measurement_model import hat_basis, hat_basis_dm, hat_basis_sparse
+
+    knots = np.linspace(3.0, 50.0, 9)
+    t = np.concatenate([np.linspace(-2.0, 60.0, 311), knots, np.random.default_rng(1).uniform(0.0, 55.0, 200)])
+    expected = np.column_stack([np.interp(t, knots, np.eye(knots.size)[:, k]) for k in range(knots.size)])
+    np.testing.assert_array_equal(hat_basis(t, knots), expected)
+    H = hat_basis_sparse(t, knots)
+    assert H.nnz == np.count_nonzero(expected) and np.all(np.diff(H.indptr) <= 2)
+    D = hat_basis_dm(t, knots)
+    assert D.nnz() == H.nnz
+    np.testing.assert_array_equal(np.array(ca.densify(D)), expected)

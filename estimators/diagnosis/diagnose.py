@@ -497,7 +497,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             f = model.solve(x0, start_fit.sigma, fixed=pinned)
             if best is None or f.objective < best.objective:
                 best = f
-        if base.sampled and any(f"{t.effect.name}.{p}" in SAMPLE_FIXED_POINTS for t in terms for p in t.effect.names):
+        if base.sampled:
             model, best = _on_samples(base, terms, peaks, config, model, best, pinned)
         return model, best
 
@@ -510,20 +510,20 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     for round_ in range(1, config.max_effects + 1):
         tried = {}
         todo = [name for name in candidates if name not in selected]
+        labels = {name: name if round_ == 1 else "+".join(selected + [name]) for name in todo}
 
         def one(name, terms=tuple(selected_terms), start=current[1]):
             model, f = refit(list(terms), name, start)
             if progress:
-                progress(name if round_ == 1 else "+".join(selected + [name]))
+                progress(labels[name])
             return model, f
 
         # the candidates' refits are independent: threads (CasADi computes without the GIL)
         with ThreadPoolExecutor(max_workers=max(1, min(config.workers, len(todo)))) as pool:
             done = list(pool.map(one, todo))
         for name, (model, f) in zip(todo, done):
-            label = name if round_ == 1 else "+".join(selected + [name])
-            tried[name] = (label, model, f)
-            fits[label] = (model, f)
+            tried[name] = (labels[name], model, f)
+            fits[labels[name]] = (model, f)
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
             for model, f in [v[1:] for v in tried.values()] + [(base_model, base_fit)]:
                 for key, value in _group_sigma(model, f.raw).items():
@@ -643,10 +643,10 @@ def _on_samples(base, terms, peaks, config, model, fit, pinned):
     """Sensor effects undone within the samples: each row's sample segment is taken about
     t + the current latency estimate, its tilts low-pass-inverted with the current tau (angle and
     rate from the spline: x = y + tau y', x' = y' + tau y''), and the fit repeated to a fixed
-    point, so neither is an extrapolation of one segment's straight line."""
-    names = {field: next(n for n in model.names if n.endswith(key)) for key, field in SAMPLE_FIXED_POINTS.items()
-             if any(n.endswith(key) for n in model.names)}
-    for _ in range(LATENCY_ITERATIONS):
+    point, so neither is an extrapolation of one segment's straight line. Without either effect
+    the fit is returned as it is."""
+    names = {field: n for key, field in SAMPLE_FIXED_POINTS.items() for n in model.names if n.endswith(key)}
+    for _ in range(LATENCY_ITERATIONS if names else 0):
         values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
         shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])
         model = GapModel(shifted, terms, peaks, solver=config.solver)

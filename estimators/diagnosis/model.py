@@ -262,14 +262,15 @@ class GapModel:
         prefix = "" if self.n_runs == 1 else f"{rs.case.name}/"
         w = self.weights(fit.sigma)
         H = hat_basis(rs.case.pings.time_s, rs.knots)
+        denom = np.sum(H * H, axis=1)
+        denom = np.where(denom > 0, denom, 1.0)
         out = np.zeros((rs.case.pings.n, 4, 3))
         for i in range(4):
             rows = np.arange(sl[f"{prefix}bt_beam{i + 1}"].start, sl[f"{prefix}bt_beam{i + 1}"].stop)
             Jb = fit.jacobian[rows] / np.where(w[rows] != 0, w[rows], 1.0)[:, None]  # unweighted
             for a in range(3):
                 dk = Jb[:, cols[:, a]] / self.scale[cols[:, a]]  # d radial / d V_knot
-                denom = np.sum(H * H, axis=1)
-                out[:, i, a] = np.sum(dk * H, axis=1) / np.where(denom > 0, denom, 1.0)
+                out[:, i, a] = np.sum(dk * H, axis=1) / denom
         return out
 
 
