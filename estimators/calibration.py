@@ -39,7 +39,7 @@ from .calibration_result import CalibrationResult, RunResult, jsonable
 from .formulations import FORMULATIONS
 from .hac import sandwich
 from .measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
-                                heading_span, knot_times, reference_rows)
+                                heading_span, knot_times)
 from .uncertainty import uncertainty
 
 TIMINGS = ("auto", "shallow", "deep", "exact")
@@ -274,7 +274,7 @@ class CalibrationProblem:
             source, reason = ("frozen", "two-stage method") if self.two_stage else choose_attitude(case, f, config.attitude)
             knots = knot_times(case, config.velocity_knot_interval_s)
             runs.append(RunSetup(case, f, source, choose_timing(case, f, config.timing), knots,
-                                 config.use_ranges and case.pings.bt_range_m is not None, reference_rows(case, knots), reason))
+                                 config.use_ranges and case.pings.bt_range_m is not None, reason))
         self.runs = runs
         self.frame = self.cases[0].attitude.frame
         self.head_sensor = self.frame == "transducer"

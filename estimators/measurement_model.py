@@ -215,7 +215,7 @@ class RunSetup:
     ``attitude_source``: ``model`` (motion-model unknowns of this run), ``samples`` (the
     sensor's samples interpolated linearly, data) or ``frozen`` (a model fixed beforehand,
     the two-stage method). ``knots``: navigation-velocity knot times (None: stationary).
-    ``reference_rows``: which reference samples enter (inside the pings' span).
+    ``reference_rows`` (derived from the knots): which reference samples enter (inside the pings' span).
     ``section_position``: position of each ping along the section in [0, 1] (section bed).
     """
 
@@ -225,16 +225,17 @@ class RunSetup:
     timing: str
     knots: np.ndarray | None
     use_ranges: bool
-    reference_rows: np.ndarray | None
     attitude_reason: str = ""
     section_position: np.ndarray | None = None
     sample_shift_s: float = 0.0  # rows take the samples' segment about t + shift (a latency's current estimate)
     sample_tilt_lead_s: float = 0.0  # and their tilts low-pass-inverted with this tau (a tilt low-pass' current estimate)
     samples: SampledAttitude | None = field(default=None, init=False)
+    reference_rows: np.ndarray | None = field(default=None, init=False)
 
     def __post_init__(self):
         if self.attitude_source not in ATTITUDE_SOURCES:
             raise ValueError(f"attitude_source: expected one of {list(ATTITUDE_SOURCES)}, got {self.attitude_source!r}")
+        self.reference_rows = reference_rows(self.case, self.knots)
         if self.attitude_source == "samples":
             self.samples = sampled_attitude(self.case, self.fit)
 

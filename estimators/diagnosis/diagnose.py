@@ -39,7 +39,7 @@ from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration import ATTITUDES, choose_attitude
 from ..measurement_model import (EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre, initial_noise,
-                                 knot_times, reference_rows)
+                                 knot_times)
 from . import where as where_mod
 from .model import DiagnosisBase, Fit, GapModel, Pins, residual_peaks
 
@@ -266,8 +266,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
             af = dataclasses.replace(af, params=AttitudeParams.from_dict(own["attitude_model"]))
         source, reason = choose_attitude(case, af, config.attitude)
         knots = knot_times(case, None)
-        runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None,
-                             reference_rows(case, knots), reason))
+        runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason))
     head = runs[0].case.attitude.frame == "transducer"
     moving = any(r.moving_reference for r in runs)
     v = cases[0].vessel
