@@ -557,8 +557,8 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png") -> Comparison
 
 
 # ----------------------------------------------------------------------------------------------- diagnose
-def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", out=None, fmt: str = "png",
-             progress: Callable[[str], None] | None = None) -> "DiagnosisResult":
+def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", navigation: str = "knots",
+             out=None, fmt: str = "png", progress: Callable[[str], None] | None = None) -> "DiagnosisResult":
     """Where the sim-to-real gap of a run lies, which unmodelled effect causes it, how far it shrinks.
 
     Parameters
@@ -572,6 +572,10 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", o
         Catalog effects to try (default: all).
     attitude : {'auto', 'model', 'samples'}
         The beams' attitude.
+    navigation : {'random_walk', 'knots'}
+        The base's vessel velocity: a velocity at every ping tied by a random-walk prior whose
+        intensity the data set (a real boat's ping-to-ping speed changes are motion), or a
+        piecewise-linear curve through knots (smooth simulated courses).
     out : str or os.PathLike, optional
         DIAG.json; DIAG.md and a residual figure are written beside it.
     fmt : {'png', 'pdf', 'svg'}
@@ -609,7 +613,8 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", o
     sources = [dataclasses.replace(s, case=as_calibrated_run(s.case, s.path or s.case.name, cal)) for s, _ in prepared]
     sources = _keyed(sources)
     notes = [n for _, ns in prepared for n in ns]
-    config = DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude)
+    config = DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude,
+                             navigation=navigation)
     run_cases = [s.case for s in sources]
     result = _diagnose(run_cases if many else run_cases[0], config, calibration=cal, progress=progress)
     if notes:

@@ -528,7 +528,7 @@ def cmd_diagnose(args) -> int:
     check_output_file(args.out, *paths, args.calibration)
     progress = _DiagnosisProgress("diagnose", len(paths))
     result = diagnose(paths if args.joint else paths[0], args.calibration, effects=args.effects, attitude=args.attitude,
-                      progress=progress.fitted_model)
+                      navigation=args.navigation, progress=progress.fitted_model)
     progress(f"done: verdict {result.verdict}")
     for w in result.base.get("case_warnings", []):
         print(f"warning: {w}")
@@ -548,7 +548,8 @@ def _diagnose_selftest(args) -> int:
 
     if args.out:
         check_output_file(args.out)
-    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects)
+    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
+                             navigation=args.navigation)
     platforms = tuple(args.platforms) if args.platforms else None
     draws = draw_cases(args.selftest, args.seed, config.effects, **({"platforms": platforms} if platforms else {}))
     rows = []
@@ -753,6 +754,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--attitude", default="auto", choices=["auto", "model", "samples"],
                    help="the beams' attitude: model (damped-mode motion model), samples (the sensor's samples, runs no "
                         "model follows) or auto")
+    s.add_argument("--navigation", default="knots", choices=["random_walk", "knots"],
+                   help="the base's vessel velocity: random_walk (a velocity at every ping, its random-walk intensity "
+                        "from the data: a real boat's speed changes between fixes are motion) or knots (a smooth curve)")
     s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
     s.add_argument("--selftest-calibrated", action="store_true",

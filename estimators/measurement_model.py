@@ -46,10 +46,11 @@ from .attitude_fit import AttitudeFit, sampled_attitude
 from .formulations import AXES, lever_block
 from .row_jacobian import RowBlock, RowJacobian
 
-GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference")
+GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference", "motion")
 NED = ("north", "east", "down")
 ATTITUDE_SOURCES = ("model", "samples", "frozen")
 MOVING_BEDS = ("off", "constant", "section")
+NAVIGATIONS = ("knots", "random_walk")
 ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
 HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
 BED_SCALE_M_S = 0.05
@@ -94,6 +95,8 @@ def hat_basis_dm(times, knots) -> ca.DM:
     stays sparse in the knot columns (a dense DM keeps its zeros as structure)."""
     H = hat_basis_sparse(times, knots).tocsc()
     return ca.DM(ca.Sparsity(H.shape[0], H.shape[1], H.indptr.tolist(), H.indices.tolist()), H.data)
+
+
 def bt_noise_from_error_velocity(case: Case) -> float:
     """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
     _, e = beam_to_instrument(case.instrument.beam_directions())
@@ -217,6 +220,10 @@ class RunSetup:
     the two-stage method). ``knots``: navigation-velocity knot times (None: stationary).
     ``reference_rows`` (derived from the knots): which reference samples enter (inside the pings' span).
     ``section_position``: position of each ping along the section in [0, 1] (section bed).
+    ``navigation``: ``knots`` (the velocity piecewise-linear between the knots, nothing else) or
+    ``random_walk`` (a velocity at every ping, :func:`ping_knots`, tied to its neighbours by a
+    random-walk prior: the ``motion`` rows (V_j+1 - V_j) / sqrt(dt_j), whose level sqrt(q) in
+    m/s/sqrt(s) is the process intensity; a real boat's ping-to-ping speed changes are motion).
     """
 
     case: Case
@@ -229,12 +236,17 @@ class RunSetup:
     section_position: np.ndarray | None = None
     sample_shift_s: float = 0.0  # rows take the samples' segment about t + shift (a latency's current estimate)
     sample_tilt_lead_s: float = 0.0  # and their tilts low-pass-inverted with this tau (a tilt low-pass' current estimate)
+    navigation: str = "knots"
     samples: SampledAttitude | None = field(default=None, init=False)
     reference_rows: np.ndarray | None = field(default=None, init=False)
 
     def __post_init__(self):
         if self.attitude_source not in ATTITUDE_SOURCES:
             raise ValueError(f"attitude_source: expected one of {list(ATTITUDE_SOURCES)}, got {self.attitude_source!r}")
+        if self.navigation not in NAVIGATIONS:
+            raise ValueError(f"navigation: expected one of {list(NAVIGATIONS)}, got {self.navigation!r}")
+        if self.navigation == "random_walk" and self.knots is not None and self.knots.size < 2:
+            raise ValueError("navigation: 'random_walk' needs at least two knots")
         self.reference_rows = reference_rows(self.case, self.knots)
         if self.attitude_source == "samples":
             self.samples = sampled_attitude(self.case, self.fit)
@@ -280,6 +292,35 @@ def knot_times(case: Case, interval_s: float | None) -> np.ndarray | None:
             interval_s = max(5 * float(np.median(np.diff(t))), duration / 30)
     n_knots = max(2, int(np.ceil(duration / interval_s)) + 1)
     return np.linspace(t[0], t[-1], n_knots)
+
+
+def ping_knots(case: Case) -> np.ndarray | None:
+    """A navigation knot at every ping (the random-walk navigation); None when the vessel is known
+    to stay put."""
+    ref = case.reference
+    if ref is not None and ref.stationary:
+        return None
+    return np.asarray(case.pings.time_s, dtype=float).copy()
+
+
+def random_walk_intensity(case: Case) -> float:
+    """Starting level of the random-walk prior, sqrt(q) in m/s/sqrt(s), from the data: the per-ping
+    static (ASC) velocities' increments, whose variance is q dt + 2 var(v) with var(v) from the beams'
+    noise (error velocity) through the Janus geometry; horizontal axes, robust (MAD) spread."""
+    from .asc import asc
+
+    v = asc(case).vessel_velocity_m_s[:, :2]
+    t = case.pings.time_s
+    ok = np.all(np.isfinite(v), axis=1)
+    if ok.sum() < 10:
+        return 0.05
+    dv, dt = np.diff(v[ok], axis=0), np.diff(t[ok])
+    z = (dv / np.sqrt(dt)[:, None]).ravel()
+    spread2 = (1.4826 * np.median(np.abs(z - np.median(z)))) ** 2
+    b = case.instrument.beam_directions()
+    var_v = bt_noise_from_error_velocity(case) ** 2 * np.mean(np.diag(np.linalg.pinv(b.T @ b))[:2])
+    q = spread2 - 2 * var_v / float(np.median(dt))
+    return float(np.sqrt(max(q, 0.01 * spread2, 1e-8)))
 
 
 def reference_rows(case: Case, knots: np.ndarray | None) -> np.ndarray | None:
@@ -642,6 +683,13 @@ class SurveyModel:
                     models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
                     channels.append(Channel(k, f"reference_{NED[j]}", t_ref, (np.isfinite(v_meas[:, j]) & covered).astype(float)))
                 n_nodes += att_c.n_instructions() * L
+            if run.navigation == "random_walk" and V is not None:  # the random-walk prior: increments over sqrt(dt)
+                dt = np.diff(run.knots)
+                t_mid = 0.5 * (run.knots[1:] + run.knots[:-1])
+                dV = ca.times(V[1:, :] - V[:-1, :], ca.DM(np.repeat(1.0 / np.sqrt(dt)[:, None], 3, axis=1)))
+                for j in range(3):
+                    models.append(dV[:, j])
+                    channels.append(Channel(k, f"motion_{NED[j]}", t_mid, np.ones(dt.size)))
         if self.has_prior:  # N(0, prior^2) on B and C: a pseudo-run of its own, outside the runs' time bins
             models.append(self.heading[1:3])
             channels.append(Channel(len(self.runs), "prior_compass_deviation", np.zeros(2), np.ones(2)))
@@ -682,6 +730,8 @@ class SurveyModel:
         out = {}
         for k, run in enumerate(self.runs):
             guess = initial_noise(run.case, run.fit, run.attitude_source == "model")
+            if run.navigation == "random_walk":
+                guess["motion"] = random_walk_intensity(run.case)
             for key in self.sigma_keys:
                 if key[0] == k:
                     out[key] = guess.get(key[1], 0.02)
@@ -739,6 +789,8 @@ class SurveyModel:
         attitude, bottom-track and reference rows as blocks over their share of s and their knots."""
         if self.effect_terms:
             raise ValueError("jacobian: 'assembled' is for calibrations; a model with effects uses the symbolic one")
+        if any(run.navigation != "knots" for run in self.runs):
+            raise ValueError("jacobian: 'assembled' is for knot navigation; a random-walk one uses the symbolic one")
         shared, index = self.shared_vector()
         shared_z = ca.substitute([shared], *subs)[0]
         u = self.unknowns

@@ -38,13 +38,15 @@ from ...models.motion import AttitudeParams, evaluate_attitude
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration import ATTITUDES, choose_attitude
-from ..measurement_model import (EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre, initial_noise,
-                                 knot_times)
+from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
+                                 initial_noise, knot_times, ping_knots, random_walk_intensity)
 from . import where as where_mod
-from .model import DiagnosisBase, Fit, GapModel, Pins, residual_peaks
+from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, residual_peaks
+from .normal_equations import as_sparse, leave_out_predictions, marginal_covariance, redundancy
 
-INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference")  # estimated without the model (pre-fit, error velocity, first differences)
+INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
+VCE_ITERATIONS = 3  # variance-component re-estimations of the base (each with a refit)
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
 
@@ -73,6 +75,7 @@ class DiagnosisConfig:
     max_effects: int = 3
     confounded_share: float = 0.9
     attitude: str = "auto"  # beams' attitude: model | samples | auto (as the calibration chooses)
+    navigation: str = "knots"  # the base's vessel velocity: random_walk (a velocity per ping) | knots
     workers: int = min(2, os.cpu_count() or 1)  # threads refitting a round's candidates at once
     solver: SolverOptions = SolverOptions(tol=1e-6, max_iter=200, hessian="gauss-newton", expand=False, mu_init=1e-5)
 
@@ -85,6 +88,8 @@ class DiagnosisConfig:
             raise ValueError(f"cv_folds: expected an integer >= 2, got {self.cv_folds}")
         if not self.cv_block_s > 0:
             raise ValueError(f"cv_block_s: expected a positive duration in s, got {self.cv_block_s}")
+        if self.navigation not in NAVIGATIONS:
+            raise ValueError(f"navigation: expected one of {list(NAVIGATIONS)}, got {self.navigation!r}")
         if self.max_effects < 1:
             raise ValueError(f"max_effects: expected an integer >= 1, got {self.max_effects}")
 
@@ -161,7 +166,11 @@ def _group_sigma(model: GapModel, raw: np.ndarray) -> dict:
 
 
 def _folds(model, folds: int, block_s: float) -> np.ndarray:
-    """Fold of every row: each run cut into contiguous blocks of about ``block_s``, dealt to the folds."""
+    """Fold of every row: each run cut into contiguous blocks of about ``block_s``, dealt to the folds.
+
+    With a velocity per ping (random walk) the channel groups of one block go to different folds:
+    the reference held out is predicted from the beams at the same pings (and the beams from the
+    reference), never from the prior bridging a hole in every channel at once."""
     row_run = getattr(model, "row_run", np.zeros(model.times.size, dtype=int))
     fold_of = np.zeros(model.times.size, dtype=int)
     offset = 0
@@ -172,6 +181,10 @@ def _folds(model, folds: int, block_s: float) -> np.ndarray:
         edges = np.linspace(t.min(), t.max() + 1e-9, n_blocks + 1)
         fold_of[rows] = (np.searchsorted(edges, t, side="right") - 1 + offset) % folds
         offset += n_blocks
+    if getattr(model, "staggered_folds", False):  # each channel group of a block held out in a fold of its own
+        groups = list(dict.fromkeys(k[1] for k in model.sigma_keys))
+        shift = np.array([groups.index(k[1]) for k in model.sigma_keys])[model.row_sigma]
+        fold_of = (fold_of + shift) % folds
     return fold_of
 
 
@@ -189,47 +202,66 @@ def _cv_residuals(model, fit, folds: int, block_s: float, fold_of: np.ndarray | 
     unit chi-square whatever its number of unknowns (navigation knots, angles), so the gap
     measures misfit, not the model's flexibility.
     """
-    J = fit.jacobian
+    J = as_sparse(fit.jacobian)
     if getattr(fit, "free", None) is not None:  # a pinned unknown or one at its bound stays put
-        J = J[:, fit.free]
+        J = J[:, np.flatnonzero(fit.free)]
     w = model.weights(fit.sigma)
     e = w * fit.raw
     fold_of = _folds(model, folds, block_s) if fold_of is None else fold_of
-    damping = 1e-6 * np.maximum(np.sum(J**2, axis=0), 1e-12)
-    pred = np.zeros_like(e)
-    used = model.mask > 0
-    A_all, b_all = J[used].T @ J[used] + np.diag(damping), J[used].T @ e[used]
-    for k in np.unique(fold_of):
-        out = fold_of == k
-        Jo, Ju = J[out], J[out & used]  # the training rows' normal equations: all used rows minus the fold's
-        A_inv = np.linalg.inv(A_all - Ju.T @ Ju)
-        step = -A_inv @ (b_all - Ju.T @ e[out & used])
-        leverage = np.sum((Jo @ A_inv) * Jo, axis=1)
-        pred[out] = (e[out] + Jo @ step) / np.sqrt(1.0 + np.maximum(leverage, 0.0))
+    pred = leave_out_predictions(J, e, model.mask > 0, fold_of)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
 
 
+def _gap_rows(model) -> np.ndarray:
+    """Rows the gap is measured on: the data's (a random-walk prior's motion rows are not data)."""
+    rows = model.mask > 0
+    keys = getattr(model, "sigma_keys", None)
+    if keys is not None:
+        prior = [i for i, k in enumerate(keys) if k[1] in PRIOR_GROUPS]
+        rows = rows & ~np.isin(model.row_sigma, prior)
+    return rows
+
+
 def _gap(model: GapModel, raw: np.ndarray, sigma: dict) -> tuple[float, float]:
-    """Excess chi-square per sample and its z-score against the noise levels."""
-    m = model.mask > 0
+    """Excess chi-square per sample and its z-score against the noise levels.
+
+    With a velocity per ping (random walk) the velocity follows the beams, and what they and the
+    reference disagree on shows in the reference's few rows: the excess is then the mean of the
+    channel groups' excesses (each group one vote, however many rows it has), its z against that
+    mean's null sd sqrt(sum_g 2 / n_g) / G."""
+    m = _gap_rows(model)
     s = np.array([sigma[k] for k in model.sigma_keys])[model.row_sigma]
-    chi2 = float(np.mean((raw[m] / s[m]) ** 2))
-    n = int(m.sum())
-    return chi2 - 1.0, (chi2 - 1.0) * np.sqrt(n / 2.0)
+    z2 = (raw / s) ** 2
+    if not getattr(model, "staggered_folds", False):
+        chi2 = float(np.mean(z2[m]))
+        return chi2 - 1.0, (chi2 - 1.0) * np.sqrt(int(m.sum()) / 2.0)
+    group_names = np.array([k[1] for k in model.sigma_keys])[model.row_sigma]
+    excess, var = [], 0.0
+    for g in dict.fromkeys(group_names[m]):
+        rows = m & (group_names == g)
+        excess.append(float(np.mean(z2[rows])) - 1.0)
+        var += 2.0 / rows.sum()
+    gap = float(np.mean(excess))
+    return gap, gap / (np.sqrt(var) / len(excess))
 
 
-def _covariance(fit: Fit, model: GapModel) -> np.ndarray:
-    """Covariance of the scaled free unknowns (others zero), scaled by the fit's chi-square."""
-    J = fit.jacobian
-    free = fit.free if fit.free is not None else np.ones(J.shape[1], dtype=bool)
+def _covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
+    """Covariance of the scaled unknowns ``index`` (a pinned one or one at its bound: zero),
+    scaled by the fit's chi-square."""
+    index = np.asarray(index, dtype=int)
+    free = fit.free if fit.free is not None else np.ones(len(model.names), dtype=bool)
     m = int((model.mask > 0).sum())
     dof = max(m - int(free.sum()), 1)
     s2 = 2.0 * fit.objective / dof
-    cov = np.zeros((J.shape[1], J.shape[1]))
-    Jf = J[:, free]
-    cov[np.ix_(free, free)] = np.linalg.pinv(Jf.T @ Jf, rcond=1e-12) * s2
-    return cov
+    cols = np.flatnonzero(free)
+    position = {c: j for j, c in enumerate(cols)}
+    inside = [j for j, i in enumerate(index) if i in position]
+    C = np.zeros((index.size, index.size))
+    if inside:
+        sub = marginal_covariance(as_sparse(fit.jacobian)[:, cols], [position[index[j]] for j in inside], s2)
+        C[np.ix_(inside, inside)] = sub
+    return C
 
 
 def _velocity_error(model: GapModel, fit: Fit) -> float | None:
@@ -265,8 +297,9 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
         if own and own.get("attitude_model"):  # this very run was calibrated: its motion model starts the fit
             af = dataclasses.replace(af, params=AttitudeParams.from_dict(own["attitude_model"]))
         source, reason = choose_attitude(case, af, config.attitude)
-        knots = knot_times(case, None)
-        runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason))
+        knots = ping_knots(case) if config.navigation == "random_walk" else knot_times(case, None)
+        runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason,
+                             navigation=config.navigation))
     head = runs[0].case.attitude.frame == "transducer"
     moving = any(r.moving_reference for r in runs)
     v = cases[0].vessel
@@ -321,7 +354,10 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
                      yaw_centre_rad=course_offset_rad(runs) if installation == "estimate" or heading != "off" else 0.0,
                      heading=heading, moving_bed=moving_bed)
     for k, run in enumerate(runs):
-        for group, value in initial_noise(run.case, run.fit, run.attitude_source == "model").items():
+        guess = initial_noise(run.case, run.fit, run.attitude_source == "model")
+        if run.navigation == "random_walk" and run.knots is not None:
+            guess["motion"] = random_walk_intensity(run.case)
+        for group, value in guess.items():
             if group in INDEPENDENT_NOISE or (k, group) not in sigma0:
                 sigma0[(k, group)] = value
     return DiagnosisBase(runs, spec, Pins(pins, "calibration" if calibration is not None else ""), sigma0, notes)
@@ -344,12 +380,34 @@ def fit_base(cases, config: DiagnosisConfig, calibration: dict | None = None):
         x0 = model.solve(x0, base.sigma0, fixed=held).x
     fit = model.solve(x0, base.sigma0)
     sigma = dict(base.sigma0)
+    if model.staggered_folds:  # a velocity per ping: every noise level and the walk's intensity from the data
+        for _ in range(VCE_ITERATIONS):
+            sigma = variance_components(model, fit)
+            fit = model.solve(fit.x, sigma)
+        return base, model, fit, sigma
     rms = _group_sigma(model, fit.raw)
     for key in model.sigma_keys:
         if key[1] not in INDEPENDENT_NOISE:
             sigma[key] = max(rms[key], 1e-6)
     fit = model.solve(fit.x, sigma)
     return base, model, fit, sigma
+
+
+def variance_components(model: GapModel, fit: Fit) -> dict:
+    """Each (run, group)'s noise level from the fit's residuals over their redundancy (Helmert /
+    Foerstner variance-component estimation: sigma_g^2 = e_g^T e_g / (n_g - sum of the group's
+    leverages)); the random walk's intensity is one of them (REML for a linear-Gaussian walk)."""
+    J = as_sparse(fit.jacobian)
+    if fit.free is not None:
+        J = J[:, np.flatnonzero(fit.free)]
+    used = model.mask > 0
+    r = redundancy(J, model.row_sigma, used, len(model.sigma_keys))
+    out = dict(fit.sigma)
+    for i, key in enumerate(model.sigma_keys):
+        m = (model.row_sigma == i) & used
+        if m.sum() > 3 and r[i] > 1.0:
+            out[key] = float(max(np.sqrt(np.sum(fit.raw[m] ** 2) / r[i]), 1e-6))
+    return out
 
 
 # ---------------------------------------------------------------------------- which effects
@@ -405,16 +463,18 @@ def _confounding(model: GapModel, fit: Fit, effect_names: list, against: list, t
     idx_b = [i for i in idx_b if free[i]]
     if not idx_e or not idx_b:
         return [], 0.0
-    C = _covariance(fit, model)
+    C = _covariance(fit, model, idx_e + idx_b)
+    ne = len(idx_e)
+    Cb = C[ne:, ne:]
     worst, names = 0.0, []
-    for i in idx_e:
+    for i in range(ne):
         if C[i, i] <= 0:
             continue
-        c = C[i, idx_b]
-        share = float(c @ np.linalg.pinv(C[np.ix_(idx_b, idx_b)]) @ c / C[i, i])
+        c = C[i, ne:]
+        share = float(c @ np.linalg.pinv(Cb) @ c / C[i, i])
         if share > worst:
             worst = share
-            F = np.abs(c) / np.sqrt(np.maximum(np.diag(C)[idx_b] * C[i, i], 1e-300))
+            F = np.abs(c) / np.sqrt(np.maximum(np.diag(Cb) * C[i, i], 1e-300))
             names = [model.names[idx_b[j]] for j in np.argsort(F)[::-1] if F[j] > 0.3][:3]
     return (names if worst > threshold else []), worst
 
@@ -442,9 +502,10 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, noise, n_obs, conf
     dbic = -2.0 * dll + k * np.log(n_obs)
     gap_after, _ = _gap(model, cv, noise)
     shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
-    C = _covariance(fit, model)
-    se = np.sqrt(np.maximum(np.diag(C), 0)) * fit.scale
     mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
+    idx = [model.names.index(n) for n in mine]
+    se_mine = np.sqrt(np.maximum(np.diag(_covariance(fit, model, idx)), 0)) * fit.scale[idx]
+    se = dict(zip(idx, se_mine))
     return EffectScore(
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
         p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else (1.0 if dll <= 0 else 0.0),
@@ -525,8 +586,10 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             fits[labels[name]] = (model, f)
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
             for model, f in [v[1:] for v in tried.values()] + [(base_model, base_fit)]:
-                for key, value in _group_sigma(model, f.raw).items():
-                    noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
+                levels = variance_components(model, f) if model.staggered_folds else _group_sigma(model, f.raw)
+                for key, value in levels.items():
+                    if key[1] not in PRIOR_GROUPS:  # the walk's intensity is the base's, not a floor
+                        noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
             noise = {k: max(v, 1e-9) for k, v in noise.items()}
             cv["base"] = _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)
         ref_gap, _ = _gap(current[0], cv[current_name], noise)

@@ -21,12 +21,13 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
 from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import periodogram_peak
 from ..measurement_model import EffectTerm, ModelSpec, SurveyModel, channel_slices, hat_basis
 
-GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference")
+PRIOR_GROUPS = ("motion",)  # pseudo-observations of a prior (the random walk's increments), not data
 
 
 def group_of(channel: str) -> str:
@@ -76,7 +77,7 @@ class Fit:
     success: bool
     status: str
     iterations: int
-    jacobian: np.ndarray  # of the weighted residuals w.r.t. the scaled unknowns
+    jacobian: object  # scipy sparse: of the weighted residuals w.r.t. the scaled unknowns
     scale: np.ndarray
     free: np.ndarray | None = None  # unknowns neither pinned nor held by an active bound
 
@@ -120,6 +121,7 @@ class GapModel:
         n_data = sum(n for _, n in self.channels)
         self.mask, self.times, self.row_run = model.mask, model.row_time, model.row_run
         self.sigma_keys, self.row_sigma = model.sigma_keys, model.row_sigma
+        self.staggered_folds = any(r.navigation == "random_walk" and r.knots is not None for r in base.runs)
         self.groups_present = list(dict.fromkeys(k[1] for k in self.sigma_keys))
         if model.raw.shape[0] != n_data:
             raise ValueError("diagnosis: the base carries no prior (its heading deviation is pinned or absent)")
@@ -186,7 +188,8 @@ class GapModel:
             x0s[:, i] = value
         w = self.weights(sigma)
         ms = multistart(self.solver, np.clip(x0s / self.scale, lbz, ubz), lbz, ubz, self.lbg, self.ubg, w, progress=False)
-        e, raw, J = (np.asarray(a) for a in self.residual_fun(ms.x, w))
+        e, raw, J = self.residual_fun(ms.x, w)
+        e, raw, J = np.asarray(e), np.asarray(raw), sparse_of(J)
         z = np.asarray(ms.x).ravel()
         tol = 1e-5 * np.maximum(np.abs(ubz - lbz), 1.0)
         free = (z - lbz > tol) & (ubz - z > tol)
@@ -267,11 +270,18 @@ class GapModel:
         out = np.zeros((rs.case.pings.n, 4, 3))
         for i in range(4):
             rows = np.arange(sl[f"{prefix}bt_beam{i + 1}"].start, sl[f"{prefix}bt_beam{i + 1}"].stop)
-            Jb = fit.jacobian[rows] / np.where(w[rows] != 0, w[rows], 1.0)[:, None]  # unweighted
+            Jb = sp.diags(1.0 / np.where(w[rows] != 0, w[rows], 1.0)) @ sp.csr_matrix(fit.jacobian)[rows]  # unweighted
             for a in range(3):
-                dk = Jb[:, cols[:, a]] / self.scale[cols[:, a]]  # d radial / d V_knot
-                out[:, i, a] = np.sum(dk * H, axis=1) / denom
+                dk = Jb[:, cols[:, a]] @ sp.diags(1.0 / self.scale[cols[:, a]])  # d radial / d V_knot
+                out[:, i, a] = np.asarray(sp.csr_matrix(dk).multiply(H).sum(axis=1)).ravel() / denom
         return out
+
+
+def sparse_of(M: ca.DM) -> sp.csr_matrix:
+    """A CasADi matrix as a scipy sparse one, its structural zeros kept out."""
+    rows, cols = M.shape
+    colind, row = M.sparsity().get_ccs()
+    return sp.csc_matrix((np.asarray(M.nonzeros(), dtype=float), row, colind), shape=(rows, cols)).tocsr()
 
 
 def residual_peaks(model: GapModel, fit: Fit) -> dict:

@@ -1,0 +1,99 @@
+"""Sparse least-squares algebra of the diagnosis against dense closed forms, variance components
+on a random walk with known levels, and the random-walk prior's rows in the measurement model."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from adcpdyn.estimators.diagnosis.normal_equations import (leave_out_predictions, marginal_covariance,
+                                                           quadratic_diagonal, factor, redundancy)
+
+
+def _problem(seed=0, n=400, p=12):
+    rng = np.random.default_rng(seed)
+    J = sp.random(n, p, density=0.3, random_state=seed, format="csr") + sp.eye(n, p, format="csr")
+    return J.tocsr(), rng.normal(size=n)
+
+
+def test_leverages_and_covariance_equal_the_dense_inverse():
+    J, _ = _problem()
+    Jd = J.toarray()
+    A_inv = np.linalg.inv(Jd.T @ Jd)
+    lu = factor((J.T @ J).tocsc(), 0.0)
+    np.testing.assert_allclose(quadratic_diagonal(lu, J), np.einsum("ij,jk,ik->i", Jd, A_inv, Jd), rtol=1e-9)
+    index = [3, 0, 7]
+    np.testing.assert_allclose(marginal_covariance(J, index, 2.5), 2.5 * A_inv[np.ix_(index, index)], rtol=1e-6)
+
+
+def test_redundancies_share_the_degrees_of_freedom():
+    """sum_g r_g = n - p (the trace of I - H), each r_g = n_g - sum of its leverages."""
+    J, _ = _problem(1)
+    Jd = J.toarray()
+    group = np.arange(J.shape[0]) % 3
+    r = redundancy(J, group, np.ones(J.shape[0], dtype=bool), 3)
+    h = np.einsum("ij,jk,ik->i", Jd, np.linalg.inv(Jd.T @ Jd), Jd)
+    assert r.sum() == pytest.approx(J.shape[0] - J.shape[1], rel=1e-9)
+    np.testing.assert_allclose(r, [np.sum(1 - h[group == g]) for g in range(3)], rtol=1e-9)
+
+
+def test_leave_out_predictions_equal_refits_without_the_fold():
+    J, y = _problem(2)
+    Jd = J.toarray()
+    x = np.linalg.lstsq(Jd, y, rcond=None)[0]
+    e = Jd @ x - y
+    fold = np.arange(J.shape[0]) // 50 % 4
+    pred = leave_out_predictions(J, e, np.ones(J.shape[0], dtype=bool), fold, damping=0.0)
+    for k in range(4):
+        tr = fold != k
+        xk = np.linalg.lstsq(Jd[tr], y[tr], rcond=None)[0]
+        h = np.einsum("ij,jk,ik->i", Jd[~tr], np.linalg.inv(Jd[tr].T @ Jd[tr]), Jd[~tr])
+        np.testing.assert_allclose(pred[~tr], (Jd @ xk - y)[~tr] / np.sqrt(1 + h), atol=1e-8)
+
+
+def test_variance_components_recover_a_random_walk_and_its_noise():
+    """A velocity per ping, a random walk of intensity sqrt(q) = 0.05 m/s/sqrt(s), seen at every ping
+    with noise 0.02 m/s (as the bottom track) and every fifth with 0.1 m/s (as the reference):
+    iterated Helmert estimates (sigma_g^2 = RSS_g / r_g) find all three levels."""
+    rng = np.random.default_rng(4)
+    n, q_sqrt, s_bt, s_ref = 3000, 0.05, 0.02, 0.1
+    t = np.cumsum(rng.uniform(0.3, 0.7, n))
+    v = np.concatenate([[0.0], np.cumsum(q_sqrt * np.sqrt(np.diff(t)) * rng.normal(size=n - 1))])
+    ref = np.arange(0, n, 5)
+    D = sp.diags([-1.0, 1.0], [0, 1], shape=(n - 1, n)).tocsr()
+    A = sp.vstack([sp.eye(n), sp.eye(n, format="csr")[ref], sp.diags(1 / np.sqrt(np.diff(t))) @ D]).tocsr()
+    y = np.concatenate([v + s_bt * rng.normal(size=n), v[ref] + s_ref * rng.normal(size=ref.size), np.zeros(n - 1)])
+    group = np.repeat([0, 1, 2], [n, ref.size, n - 1])
+    sigma = np.array([0.1, 0.1, 0.1])
+    for _ in range(30):
+        w = 1.0 / sigma[group]
+        J = sp.diags(w) @ A
+        x = sp.linalg.spsolve((J.T @ J).tocsc(), J.T @ (w * y))
+        res = A @ x - y
+        r = redundancy(J, group, np.ones(group.size, dtype=bool), 3)
+        sigma = np.sqrt([np.sum(res[group == g] ** 2) / r[g] for g in range(3)])
+    np.testing.assert_allclose(sigma, [s_bt, s_ref, q_sqrt], rtol=0.12)
+
+
+def test_random_walk_rows_are_velocity_increments_over_root_dt():
+    """The base's motion rows are (V_j+1 - V_j) / sqrt(t_j+1 - t_j) of its per-ping velocities, the
+    walk's intensity estimated from the data beside the noise levels."""
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, fit_base
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=1)
+    base, model, fit, sigma = fit_base([case], DiagnosisConfig(navigation="random_walk"))
+    knots = base.runs[0].knots
+    np.testing.assert_array_equal(knots, case.pings.time_s)
+    sl = model.channel_slices()
+    for axis, channel in zip("xyz", ("motion_north", "motion_east", "motion_down")):
+        V = np.array([fit.x[model.names.index(f"V{j}_{axis}")] for j in range(knots.size)])
+        np.testing.assert_allclose(fit.raw[sl[channel]], np.diff(V) / np.sqrt(np.diff(knots)), atol=1e-12)
+    assert 0 < sigma[(0, "motion")] < 1.0 and sigma[(0, "motion")] != base.sigma0[(0, "motion")]
+    with pytest.raises(ValueError, match="navigation: expected one of"):
+        DiagnosisConfig(navigation="spline")
