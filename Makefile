@@ -21,7 +21,7 @@ test: $(STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
-	@for suite in correction calibration formulations solvers scale survey; do \
+	@for suite in correction calibration formulations solvers scale survey diagnosis; do \
 		$(VENV)/bin/adcpdyn bench $$suite --quick --out benchmarks/results || exit 1; done
 
 clean:

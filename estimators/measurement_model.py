@@ -54,6 +54,7 @@ NAVIGATIONS = ("knots", "random_walk")
 ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
 HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
 BED_SCALE_M_S = 0.05
+ROTATION_STEP_S = 0.05  # central-difference step of the reference point's rotational velocity (its slope)
 REFERENCE_MARGIN_KNOTS = 1.0  # reference samples kept up to this many knot intervals beyond the pings
 
 
@@ -236,6 +237,7 @@ class RunSetup:
     section_position: np.ndarray | None = None
     sample_shift_s: float = 0.0  # rows take the samples' segment about t + shift (a latency's current estimate)
     sample_tilt_lead_s: float = 0.0  # and their tilts low-pass-inverted with this tau (a tilt low-pass' current estimate)
+    reference_shift_s: float = 0.0  # reference rows take the navigation at t - shift (a reference latency's current estimate)
     navigation: str = "knots"
     samples: SampledAttitude | None = field(default=None, init=False)
     reference_rows: np.ndarray | None = field(default=None, init=False)
@@ -323,6 +325,14 @@ def random_walk_intensity(case: Case) -> float:
     return float(np.sqrt(max(q, 0.01 * spread2, 1e-8)))
 
 
+def navigation_slope(times: np.ndarray, knots: np.ndarray, V):
+    """Time derivative of the navigation velocity V (knots x 3) at ``times``: central differences
+    of its interpolant over half the median knot spacing (the slope of the segment a time falls in,
+    as a small shift of the interpolant sees it); linear in V, so it enters the NLP as an expression."""
+    h = 0.5 * float(np.median(np.diff(knots)))
+    return ca.mtimes((hat_basis_dm(times + h, knots) - hat_basis_dm(times - h, knots)) / (2 * h), V)
+
+
 def reference_rows(case: Case, knots: np.ndarray | None) -> np.ndarray | None:
     """Indices of the reference samples inside the pings' span (plus one knot interval);
     a one-line error when a moving reference has none there."""
@@ -391,6 +401,8 @@ class EffectContext:
         unit = lambda a: ca.DM(np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]))
         self.heading_dir_ping = unit(psi(self.ping_time_s))
         self.heading_dir_reference = unit(psi(self.reference_time_s)) if self.reference_time_s is not None else None
+        self.reference_slope = None  # the reference point's velocity slope at the rows' times, set by the model
+        self.reference_shift_s = run.reference_shift_s  # the delay the rows are taken about
 
     def residual_peak(self, key: str) -> float:
         return float(self.peaks.get(key, 1.0))
@@ -672,9 +684,16 @@ class SurveyModel:
             if run.moving_reference:
                 t_ref, v_meas = run.reference_time_s, run.reference_velocity_m_s
                 L = t_ref.size
-                dLam = att_c.map(L)(ca.DM(t_ref).T, self._p_rows(k, t_ref))[2]
-                v_model = ca.mtimes(hat_basis_dm(t_ref, run.knots), V)
+                t_nav = t_ref - run.reference_shift_s  # the time each sample holds (a reference latency's estimate)
+                dLam = att_c.map(L)(ca.DM(t_nav).T, self._p_rows(k, t_nav))[2]
+                v_model = ca.mtimes(hat_basis_dm(t_nav, run.knots), V)
                 p_ref = ca.DM(self.reference_point_sensor(case))
+                if any(getattr(e, "shifts_reference", False) for e, _ in terms):  # d/dt of the antenna's velocity
+                    rot = [REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), att_c.map(L)(ca.DM(t_nav + dt).T,
+                                                                                     self._p_rows(k, t_nav + dt))[2],
+                                                     ca.repmat(p_ref, 1, L)) for dt in (-ROTATION_STEP_S, ROTATION_STEP_S)]
+                    ctx.reference_slope = (navigation_slope(t_nav, run.knots, V)
+                                           + ca.transpose(rot[1] - rot[0]) / (2 * ROTATION_STEP_S))
                 for e, th in terms:
                     v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
                 v_ref = REFERENCE_VELOCITY.map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))

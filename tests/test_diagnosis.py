@@ -17,7 +17,7 @@ from adcpdyn.models.effects import CATALOG, get_effect
 from adcpdyn.cases.simulation import simulate
 
 ISSUE_EFFECTS = {"attitude_latency", "sound_speed_error", "beam_angle_error", "heave", "surge", "forced_roll",
-                 "compass_deviation", "tilt_lowpass", "moving_bed", "reference_lever_arm",
+                 "compass_deviation", "tilt_lowpass", "moving_bed", "reference_lever_arm", "reference_latency",
                  "installation_misalignment", "deep_water_timing"}
 
 
@@ -46,6 +46,7 @@ def test_each_effect_is_injected_and_recorded(name):
     changed.append(not np.allclose(case.attitude.ypr(), clean.attitude.ypr()))
     if case.reference is not None and case.reference.velocity_m_s is not None:
         changed.append(not np.allclose(case.reference.velocity_m_s, clean.reference.velocity_m_s))
+        changed.append(not np.allclose(case.reference.time_s, clean.reference.time_s))  # a late time stamp
     assert any(changed)
 
 

@@ -4,6 +4,7 @@ on a random walk with known levels, and the random-walk prior's rows in the meas
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -97,3 +98,68 @@ def test_random_walk_rows_are_velocity_increments_over_root_dt():
     assert 0 < sigma[(0, "motion")] < 1.0 and sigma[(0, "motion")] != base.sigma0[(0, "motion")]
     with pytest.raises(ValueError, match="navigation: expected one of"):
         DiagnosisConfig(navigation="spline")
+
+
+def test_reference_latency_model_is_the_velocity_a_delay_earlier():
+    """The hook's v(t - d0) - (d - d0) v'(t - d0), the slope from the knots, equals v(t - d) for a
+    velocity linear in time whatever the expansion point, and to second order in d - d0 otherwise."""
+    import casadi as ca
+
+    from adcpdyn.estimators.measurement_model import hat_basis_dm, navigation_slope
+    from adcpdyn.models.effects import get_effect
+
+    knots = np.arange(0.0, 60.0, 0.05)
+    t_ref = np.linspace(10.0, 50.0, 41)
+    effect = get_effect("reference_latency")
+    linear = lambda t: np.column_stack([0.5 + 0.04 * t, -0.2 + 0.01 * t, 0.0 * t])
+    curved = lambda t: np.column_stack([0.5 + 0.04 * t - 0.001 * t**2, -0.2 + 0.01 * t, 0.0 * t])
+    for velocity, delay, shift, tol in ((linear, 1.5, 0.0, 1e-9), (linear, -0.7, 0.4, 1e-9), (curved, 1.1, 1.0, 2e-5)):
+        V = ca.DM(velocity(knots))
+        ctx = SimpleNamespace(reference_slope=navigation_slope(t_ref - shift, knots, V), reference_shift_s=shift)
+        v = ca.mtimes(hat_basis_dm(t_ref - shift, knots), V)
+        got = np.asarray(ca.evalf(effect.reference_velocity(v, ctx, ca.DM([delay]))))
+        np.testing.assert_allclose(got, velocity(t_ref - delay), atol=tol)
+
+
+def test_reference_latency_is_recorded_as_late_time_stamps():
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.diagnosis.selftest import with_effect
+
+    sc = get_scenario("diag_boat")
+    sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0))
+    clean, late = simulate(sc, seed=5), simulate(with_effect(sc, "reference_latency", {"delay_s": 1.25}), seed=5)
+    np.testing.assert_allclose(late.reference.time_s, clean.reference.time_s + 1.25)
+    np.testing.assert_array_equal(late.reference.velocity_m_s, clean.reference.velocity_m_s)
+    np.testing.assert_array_equal(late.pings.bt_radial_m_s, clean.pings.bt_radial_m_s)
+
+
+def test_field_errors_are_written_on_the_recorded_channels():
+    """Each injected field error changes only its channel, by the stated amount; bad names and an
+    error needing a reference on a run without one are refused in one line."""
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.diagnosis.field_errors import FIELD_ERRORS, inject
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=2)
+    turned = inject(case, "compass_offset_deg", 3.0)
+    np.testing.assert_allclose(turned.attitude.heading_rad - case.attitude.heading_rad, np.radians(3.0))
+    np.testing.assert_array_equal(turned.pings.bt_radial_m_s, case.pings.bt_radial_m_s)
+    late = inject(case, "attitude_latency_s", 0.4)
+    np.testing.assert_allclose(late.attitude.time_s - case.attitude.time_s, 0.4)
+    ref_late = inject(case, "reference_latency_s", 1.5)
+    np.testing.assert_allclose(ref_late.reference.time_s - case.reference.time_s, 1.5)
+    bed = inject(case, "moving_bed_m_s", 0.2)
+    u = bed.reference.velocity_m_s - case.reference.velocity_m_s
+    v = np.nanmean(case.reference.velocity_m_s, axis=0)
+    np.testing.assert_allclose(np.linalg.norm(u, axis=1), 0.2)
+    assert abs(u[0] @ v) < 1e-9 and v[0] * u[0, 1] - v[1] * u[0, 0] < 0  # across the course, to port (course - 90 deg)
+    fast = inject(case, "sound_speed_relative", 0.03)
+    np.testing.assert_allclose(fast.pings.bt_radial_m_s, 1.03 * case.pings.bt_radial_m_s)
+    assert set(FIELD_ERRORS) == {"compass_offset_deg", "attitude_latency_s", "reference_latency_s", "moving_bed_m_s",
+                                 "sound_speed_relative"}
+    with pytest.raises(ValueError, match="error: expected one of"):
+        inject(case, "compass", 1.0)
+    with pytest.raises(ValueError, match="needs a moving reference"):
+        inject(case.replace(reference=None), "moving_bed_m_s", 0.1)

@@ -433,6 +433,9 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
         return False, ("not observable: a sensor inside the head turns with the head, so the beams' attitude does not "
                        "depend on how the head sits in the vessel (notes on the paper, erratum 5); its heading against "
                        "the reference is the base's heading misalignment")
+    if name == "reference_latency" and any(r.navigation == "random_walk" for r in base.runs):
+        return False, ("needs a smooth navigation (--navigation knots): with a velocity at every ping, shifting the "
+                       "reference trades against the walk's ping-to-ping steps instead of a delay")
     if name == "deep_water_timing" and base.runs[0].timing != "shallow":
         return False, "part of the base: the calibration's two-way timing"
     return True, ""
@@ -557,9 +560,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             f = model.solve(x0, start_fit.sigma, fixed=pinned)
             if best is None or f.objective < best.objective:
                 best = f
-        if base.sampled:
-            model, best = _on_samples(base, terms, peaks, config, model, best, pinned)
-        return model, best
+        return _fixed_points(base, terms, peaks, config, model, best, pinned)
 
     # round 1: every candidate against the base (the ranking); later rounds: on top of the chosen ones
     noise = dict(sigma_fit)
@@ -699,15 +700,17 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
 LATENCY_ITERATIONS = 3
 ALTERNATIVE_SHARE = 0.8  # a significant effect removing this share of the chosen one's shrink is named beside it
 SAMPLE_FIXED_POINTS = {"attitude_latency.delay_s": "sample_shift_s", "tilt_lowpass.tau_s": "sample_tilt_lead_s"}
+REFERENCE_FIXED_POINTS = {"reference_latency.delay_s": "reference_shift_s"}
 
 
-def _on_samples(base, terms, peaks, config, model, fit, pinned):
-    """Sensor effects undone within the samples: each row's sample segment is taken about
-    t + the current latency estimate, its tilts low-pass-inverted with the current tau (angle and
-    rate from the spline: x = y + tau y', x' = y' + tau y''), and the fit repeated to a fixed
-    point, so neither is an extrapolation of one segment's straight line. Without either effect
-    the fit is returned as it is."""
-    names = {field: n for key, field in SAMPLE_FIXED_POINTS.items() for n in model.names if n.endswith(key)}
+def _fixed_points(base, terms, peaks, config, model, fit, pinned):
+    """Delays re-centred and the fit repeated to a fixed point, so no expansion reaches far.
+    On the sensor's samples each row's segment is taken about t + the current attitude latency,
+    its tilts low-pass-inverted with the current tau (angle and rate from the spline:
+    x = y + tau y', x' = y' + tau y''); the reference rows take the navigation at t - the current
+    reference latency. Without such an effect the fit is returned as it is."""
+    points = {**(SAMPLE_FIXED_POINTS if base.sampled else {}), **REFERENCE_FIXED_POINTS}
+    names = {field: n for key, field in points.items() for n in model.names if n.endswith(key)}
     for _ in range(LATENCY_ITERATIONS if names else 0):
         values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
         shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])

@@ -15,6 +15,7 @@ from .forced_roll import ForcedRoll
 from .heave import Heave
 from .installation_misalignment import InstallationMisalignment
 from .moving_bed import MovingBed
+from .reference_latency import ReferenceLatency
 from .reference_lever_arm import ReferenceLeverArm
 from .sound_speed_error import SoundSpeedError
 from .surge import Surge
@@ -22,7 +23,7 @@ from .tilt_lowpass import TiltLowpass
 
 CATALOG: dict[str, Effect] = {e.name: e for e in (
     AttitudeLatency(), SoundSpeedError(), BeamAngleError(), Heave(), Surge(), ForcedRoll(), CompassDeviation(),
-    TiltLowpass(), MovingBed(), ReferenceLeverArm(), InstallationMisalignment(), DeepWaterTiming(),
+    TiltLowpass(), MovingBed(), ReferenceLeverArm(), ReferenceLatency(), InstallationMisalignment(), DeepWaterTiming(),
 )}
 
 
