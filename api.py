@@ -35,7 +35,7 @@ if TYPE_CHECKING:  # pragma: no cover - names for annotations only
     from .estimators.calibration_result import CalibrationResult
     from .estimators.diagnosis.diagnose import DiagnosisResult
 
-__all__ = ["ImportedCase", "Comparison", "read_case", "import_file", "simulate", "read_calibration", "calibrate",
+__all__ = ["ImportedCase", "Comparison", "read_case", "import_file", "simulate", "read_calibration", "calibrate", "field_selftest",
            "correct", "compare", "diagnose", "to_xarray", "export", "CORRECTION_METHODS", "TIMINGS", "REFERENCES",
            "FIGURE_FORMATS"]
 
@@ -624,6 +624,57 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
 
         write_report(result, out, fmt=fmt)
     return result
+
+
+def field_selftest(case, calibration=None, *, navigation: str = "knots", effects=None, attitude: str = "auto",
+                   sizes: dict | None = None, out=None, fmt: str = "png",
+                   progress: Callable[[str], None] | None = None) -> dict:
+    """What this file can detect: each field error (compass offset, attitude and reference
+    latency, moving bed, sound speed) injected at typical sizes into the file's recorded channels,
+    and each run diagnosed blind with the file's calibration.
+
+    Parameters
+    ----------
+    case : path, Case or ImportedCase
+    calibration : path, CalibrationResult, CalibrationRecord or dict, optional
+        The file's calibration; without one the file is calibrated on itself first (8 starts).
+    navigation, effects, attitude : as :func:`diagnose`.
+    sizes : dict, optional
+        {error: sizes} (``adcpdyn.estimators.diagnosis.field_errors.FIELD_ERRORS`` names and
+        units); default the field's typical sizes.
+    out : str or os.PathLike, optional
+        SELFTEST.json; SELFTEST.md and a figure are written beside it.
+
+    Returns
+    -------
+    dict
+        ``rows`` (per run: error, size, verdict, named or not, shrink, estimate, gap) and
+        ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
+    """
+    from .estimators.calibration_record import calibration_dict
+    from .estimators.correct_case import as_calibrated_run
+    from .estimators.diagnosis.diagnose import DiagnosisConfig
+    from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
+
+    _choice("fmt", fmt, FIGURE_FORMATS)
+    if out is not None:
+        from .cases.atomic import check_output_file
+
+        check_output_file(out, *[p for p in [case, calibration] if isinstance(p, (str, os.PathLike))], option="out")
+    src, notes = _prepared(_source(case, "case"))
+    note = None
+    if calibration is None:
+        calibration = calibrate(src.case, n_starts=8)
+        note = "calibrated on itself (8 starts): no --calibration given"
+    cal = calibration_dict(calibration)
+    run = as_calibrated_run(src.case, src.path or src.case.name, cal)
+    config = DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude,
+                             navigation=navigation)
+    res = _field_selftest(run, cal, config, sizes=sizes, progress=progress)
+    res["notes"] = notes + ([note] if note else [])
+    if out is not None:
+        write_field_selftest(res, out, fmt=fmt)
+    return res
 
 
 # ----------------------------------------------------------------------------------------------- export

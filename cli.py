@@ -514,6 +514,8 @@ def cmd_demo(args) -> int:
 def cmd_diagnose(args) -> int:
     if args.selftest:
         return _diagnose_selftest(args)
+    if args.field_selftest:
+        return _diagnose_field_selftest(args)
     if not args.case or not args.out:
         raise ValueError("diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)")
     from .api import diagnose
@@ -536,6 +538,24 @@ def cmd_diagnose(args) -> int:
     print(table(result))
     print("wrote " + ", ".join(str(p) for p in written))
     return 0 if result.base["success"] else 1
+
+
+def _diagnose_field_selftest(args) -> int:
+    from .api import field_selftest
+    from .cases.atomic import check_output_file
+    from .estimators.diagnosis.field_selftest import format_field_selftest
+
+    if len(args.case) != 1 or not args.out or args.joint:
+        raise ValueError("diagnose: --field-selftest expects one CASE.h5 and --out SELFTEST.json (no --joint)")
+    check_output_file(args.out, args.case[0], args.calibration)
+    res = field_selftest(args.case[0], args.calibration, navigation=args.navigation, effects=args.effects,
+                         attitude=args.attitude, out=args.out, fmt=args.format,
+                         progress=lambda text: print(text, file=sys.stderr, flush=True))
+    for n in res["notes"]:
+        print(f"note: {n}")
+    print(format_field_selftest(res))
+    print(f"wrote {args.out} and its .md and figure beside it")
+    return 0
 
 
 def _diagnose_selftest(args) -> int:
@@ -757,6 +777,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--navigation", default="knots", choices=["random_walk", "knots"],
                    help="the base's vessel velocity: random_walk (a velocity at every ping, its random-walk intensity "
                         "from the data: a real boat's speed changes between fixes are motion) or knots (a smooth curve)")
+    s.add_argument("--field-selftest", action="store_true",
+                   help="what this file can detect: the field's errors (compass offset, attitude and reference latency, "
+                        "moving bed, sound speed) injected at typical sizes into its recorded channels, each diagnosed "
+                        "blind with its calibration (--calibration, else calibrated on itself)")
     s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
     s.add_argument("--selftest-calibrated", action="store_true",

@@ -28,12 +28,14 @@ def _real_dir() -> Path:
 
 
 def bench_diagnosis(quick: bool) -> dict:
+    """Every file through ``api.field_selftest`` (the same code as ``diagnose --field-selftest``),
+    calibrated once on itself, for each base."""
     from .. import api
-    from ..estimators.diagnosis.field_errors import FIELD_ERRORS, inject
+    from ..estimators.diagnosis.field_errors import FIELD_ERRORS
 
     rows, missing = [], []
-    files = FILES[:1] if quick else FILES
-    for name in files:
+    sizes = {e: (spec[2][-1:] if quick else spec[2]) for e, spec in FIELD_ERRORS.items()}
+    for name in FILES[:1] if quick else FILES:
         path = _real_dir() / name
         if not path.exists():
             missing.append(str(path))
@@ -42,23 +44,13 @@ def bench_diagnosis(quick: bool) -> dict:
         tic = time.perf_counter()
         calibration = api.calibrate(case, n_starts=8)
         calib_s = time.perf_counter() - tic
-        trials = [("clean", 0.0)] + [(e, s) for e, (_, _, sizes) in FIELD_ERRORS.items()
-                                     for s in (sizes[-1:] if quick else sizes)]
-        for error, size in trials:
-            run = case if error == "clean" else inject(case, error, size)
-            for nav in NAVIGATIONS:
-                tic = time.perf_counter()
-                r = api.diagnose(run, calibration, navigation=nav)
-                seconds = time.perf_counter() - tic
-                expected = "none" if error == "clean" else FIELD_ERRORS[error][0]
-                top = next((s for s in r.ranking if s["effect"] == expected), None)
-                rows.append({"file": name, "pings": case.pings.n, "error": error, "size": size, "navigation": nav,
-                             "expected": expected, "verdict": r.verdict, "hit": r.verdict.split("+")[0] == expected,
-                             "gap": r.gap_before, "gap_z": r.gap_z_before, "remaining": r.remaining_gap_significant,
-                             "estimate": top["params"] if top else None, "se": top["params_se"] if top else None,
-                             "seconds": seconds, "calibration_s": calib_s, "noise": r.noise})
-                print(f"{name:>26s} {error:>22s} {size:6.2f} {nav:>11s} -> {r.verdict:<28s} gap {r.gap_before:7.3f} "
-                      f"z {r.gap_z_before:8.1f}  {seconds:5.1f} s", flush=True)
+        for nav in NAVIGATIONS:
+            res = api.field_selftest(case, calibration, navigation=nav, sizes=sizes)
+            for r in res["rows"]:
+                rows.append({"file": name, "pings": case.pings.n, "navigation": nav, "calibration_s": calib_s,
+                             **{k: v for k, v in r.items() if k != "statement"}})
+                print(f"{name:>26s} {r['error']:>22s} {r['size']:6.2f} {nav:>11s} -> {r['verdict']:<28s} "
+                      f"gap {r['gap']:7.3f} z {r['gap_z']:8.1f}  {r['seconds']:5.1f} s", flush=True)
     return {"machine": machine(), "rows": rows, "missing": missing, "summary": _summary(rows)}
 
 

@@ -38,6 +38,7 @@ from ...models.motion import AttitudeParams, evaluate_attitude
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration import ATTITUDES, choose_attitude
+from ..hac import andrews_lags, newey_west
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  initial_noise, knot_times, ping_knots, random_walk_intensity)
 from . import where as where_mod
@@ -62,6 +63,11 @@ class DiagnosisConfig:
     estimated, so a few percent of excess is not evidence). Up to ``max_effects`` effects
     are chosen one after another; an effect sharing more than ``confounded_share`` of its
     parameters' variance with a base unknown or a chosen effect is named, not chosen.
+
+    On a random-walk base (real files) the BIC is the coloured-residual one (``delta_bic_hac``:
+    the likelihood ratio over the long-run/white variance ratio of its per-bin gains) and the
+    held-out gap need only shrink by ``min_shrink_walk``: a real file keeps structure no catalog
+    effect explains, so a real effect removes a smaller share of the whole gap.
     """
 
     effects: tuple = tuple(CATALOG)
@@ -69,6 +75,7 @@ class DiagnosisConfig:
     cv_block_s: float = 2.0
     bic_margin: float = 10.0
     min_shrink: float = 0.25
+    min_shrink_walk: float = 0.05
     gap_z: float = 6.0
     min_gap: float = 0.1
     max_modes: int = 3
@@ -109,6 +116,8 @@ class EffectScore:
     success: bool
     status: str
     iterations: int
+    colour_factor: float = 1.0  # long-run over white variance of the per-bin likelihood gains (>= 1)
+    delta_bic_hac: float = 0.0  # -2 delta_ll / colour_factor + k log n: the BIC gain under coloured residuals
     significant: bool = False
     confounded_with: list = field(default_factory=list)
     confounded_share: float = 0.0
@@ -509,13 +518,42 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, noise, n_obs, conf
     idx = [model.names.index(n) for n in mine]
     se_mine = np.sqrt(np.maximum(np.diag(_covariance(fit, model, idx)), 0)) * fit.scale[idx]
     se = dict(zip(idx, se_mine))
+    colour = _colour_factor(model, fit, ref_model, ref_fit, noise)
     return EffectScore(
+        colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
         p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else (1.0 if dll <= 0 else 0.0),
         n_params=k, params={n: float(fit.x[model.names.index(n)]) for n in mine},
         params_se={n: float(se[model.names.index(n)]) for n in mine}, gap_after=float(gap_after),
         shrink_fraction=float(shrink), velocity_error_m_s=_velocity_error(model, fit), success=fit.success,
         status=fit.status, iterations=fit.iterations, round=round_)
+
+
+def _colour_factor(model: GapModel, fit: Fit, ref_model: GapModel, ref_fit: Fit, noise: dict) -> float:
+    """How much coloured residuals inflate the likelihood ratio of an effect: each data row's
+    contribution to 2 delta_ll, (e_ref / s)^2 - (e / s)^2, summed per time bin (a ping interval)
+    of each run, and the Newey-West long-run variance of that series over its white variance
+    (centred; Bartlett lags by Andrews' AR(1) plug-in; at least 1). A real file's slow wander makes
+    neighbouring bins' gains agree, and 2 delta_ll / factor is then the white-equivalent statistic."""
+    keys_ref = [noise[k] for k in ref_model.sigma_keys]
+    keys = [noise[k] for k in model.sigma_keys]
+    rows, rows_ref = _gap_rows(model), _gap_rows(ref_model)
+    if rows.sum() != rows_ref.sum():
+        return 1.0
+    d = (ref_fit.raw[rows_ref] / np.array(keys_ref)[ref_model.row_sigma[rows_ref]]) ** 2 \
+        - (fit.raw[rows] / np.array(keys)[model.row_sigma[rows]]) ** 2
+    run, t = model.row_run[rows], model.times[rows]
+    long_run = white = 0.0
+    for r in np.unique(run):
+        m = run == r
+        width = float(np.median(np.diff(model.base.runs[r].case.pings.time_s)))
+        b = np.floor((t[m] - t[m].min()) / width).astype(int)
+        series = np.bincount(b, weights=d[m])[np.bincount(b) > 0]
+        series = (series - series.mean())[:, None]
+        lags, _ = andrews_lags(series)
+        long_run += float(newey_west(series, lags)[0, 0])
+        white += float(series[:, 0] @ series[:, 0])
+    return max(long_run / white, 1.0) if white > 0 else 1.0
 
 
 # ---------------------------------------------------------------------------- main
@@ -568,6 +606,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     selected_terms, selected, confounded, ranking, alternatives = [], [], [], [], []
     current_name, current = "base", (base_model, base_fit)
     cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
+    walk = base_model.staggered_folds  # a velocity per ping: coloured-residual BIC, smaller shrink share
     for round_ in range(1, config.max_effects + 1):
         tried = {}
         todo = [name for name in candidates if name not in selected]
@@ -601,15 +640,19 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
             others = against + [n for n in model.effect_names if n not in mine]
             s.confounded_with, s.confounded_share = _confounding(model, f, mine, others, config.confounded_share)
-            s.significant = bool(s.delta_bic < -config.bic_margin and s.shrink_fraction >= config.min_shrink
-                                 and ref_gap > config.min_gap)
+            if walk:
+                s.significant = bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink_walk
+                                     and ref_gap > config.min_gap)
+            else:
+                s.significant = bool(s.delta_bic < -config.bic_margin and s.shrink_fraction >= config.min_shrink
+                                     and ref_gap > config.min_gap)
             scores.append(s)
-        scores.sort(key=lambda s: (not s.significant, s.delta_bic))
+        scores.sort(key=lambda s: (not s.significant, s.delta_bic_hac if walk else s.delta_bic))
         ranking += scores
         # an effect the base's unknowns (or a chosen effect) largely stand in for: said in words, whether or not
         # the rest of its signature still carries it
         for sc in scores:
-            if sc.confounded_with and sc.delta_bic < -config.bic_margin and sc.effect not in [c["effect"] for c in confounded]:
+            if sc.confounded_with and (sc.delta_bic_hac if walk else sc.delta_bic) < -config.bic_margin and sc.effect not in [c["effect"] for c in confounded]:
                 confounded.append({"effect": sc.effect, "with": sc.confounded_with, "shared_variance": sc.confounded_share,
                                    "chosen": sc.significant, "statement": _reason(sc.effect, sc.confounded_with, base)})
         best = next((s for s in scores if s.significant), None)

@@ -58,16 +58,21 @@ def leave_out_predictions(J, e: np.ndarray, used: np.ndarray, fold_of: np.ndarra
     return pred
 
 
+def inverse_columns(J, index) -> np.ndarray:
+    """Columns ``index`` of (J^T J)^-1 (unknowns x len(index)), by solves against one sparse LU."""
+    J = as_sparse(J)
+    index = np.asarray(index, dtype=int)
+    E = np.zeros((J.shape[1], index.size))
+    E[index, np.arange(index.size)] = 1.0
+    return factor((J.T @ J).tocsc()).solve(E) if index.size else E
+
+
 def marginal_covariance(J, index, s2: float = 1.0) -> np.ndarray:
     """Covariance block s2 (J^T J)^-1 [index, index] of the unknowns ``index`` (columns of J)."""
-    J = as_sparse(J)
     index = np.asarray(index, dtype=int)
     if index.size == 0:
         return np.zeros((0, 0))
-    lu = factor((J.T @ J).tocsc())
-    E = np.zeros((J.shape[1], index.size))
-    E[index, np.arange(index.size)] = 1.0
-    C = lu.solve(E)[index]
+    C = inverse_columns(J, index)[index]
     return s2 * 0.5 * (C + C.T)
 
 
