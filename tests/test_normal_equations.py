@@ -30,6 +30,38 @@ def test_leverages_and_covariance_equal_the_dense_inverse():
     np.testing.assert_allclose(marginal_covariance(J, index, 2.5), 2.5 * A_inv[np.ix_(index, index)], rtol=1e-6)
 
 
+def test_banded_selected_inversion_equals_the_dense_inverse():
+    """Velocities per ping (each row on one or two neighbouring knots) plus global unknowns: the
+    leverages by the band of B^-1 and a Schur complement equal diag(J A^-1 J^T) computed densely,
+    and a wide band falls back to the solves."""
+    from adcpdyn.estimators.diagnosis.normal_equations import arrow_leverages, band_of_inverse, leverages, ridged
+    from scipy.linalg import cholesky_banded
+
+    rng = np.random.default_rng(3)
+    knots, g, m = 60, 7, 1500
+    I, C = [], []
+    for r in range(m):
+        j = int(rng.integers(0, knots - 1))
+        cols = list(range(3 * j, 3 * j + (6 if rng.random() < 0.5 else 3))) + list(3 * knots + rng.choice(g, 3, replace=False))
+        I += [r] * len(cols)
+        C += cols
+    J = sp.csr_matrix((rng.normal(size=len(I)), (I, C)), shape=(m, 3 * knots + g))
+    A = ridged((J.T @ J).tocsc())
+    Jd, Ad = J.toarray(), A.toarray()
+    dense = np.einsum("ij,jk,ik->i", Jd, np.linalg.inv(Ad), Jd)
+    local = np.arange(J.shape[1]) < 3 * knots
+    np.testing.assert_allclose(leverages(A, J, local), dense, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(leverages(A, J), dense, rtol=1e-8, atol=1e-12)
+    B = Ad[:3 * knots, :3 * knots]
+    p = 5
+    ab = np.array([np.concatenate([np.diag(B, -d), np.zeros(d)]) for d in range(p + 1)])
+    zb = band_of_inverse(cholesky_banded(ab, lower=True))
+    Binv = np.linalg.inv(B)
+    for d in range(p + 1):
+        np.testing.assert_allclose(zb[d, :3 * knots - d], np.diag(Binv, -d), rtol=1e-8, atol=1e-12)
+    assert arrow_leverages(A, J, np.ones(J.shape[1], dtype=bool)) is None  # the globals make the band wide
+
+
 def test_redundancies_share_the_degrees_of_freedom():
     """sum_g r_g = n - p (the trace of I - H), each r_g = n_g - sum of its leverages."""
     J, _ = _problem(1)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -47,6 +48,7 @@ from .normal_equations import as_sparse, leave_out_predictions, marginal_covaria
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
+VELOCITY_NAME = re.compile(r"V\d+_[xyz]")
 VCE_ITERATIONS = 3  # variance-component re-estimations of the base (each with a refit)
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
@@ -212,14 +214,25 @@ def _cv_residuals(model, fit, folds: int, block_s: float, fold_of: np.ndarray | 
     measures misfit, not the model's flexibility.
     """
     J = as_sparse(fit.jacobian)
+    cols = np.arange(J.shape[1])
     if getattr(fit, "free", None) is not None:  # a pinned unknown or one at its bound stays put
-        J = J[:, np.flatnonzero(fit.free)]
+        cols = np.flatnonzero(fit.free)
+        J = J[:, cols]
     w = model.weights(fit.sigma)
     e = w * fit.raw
     fold_of = _folds(model, folds, block_s) if fold_of is None else fold_of
-    pred = leave_out_predictions(J, e, model.mask > 0, fold_of)
+    pred = leave_out_predictions(J, e, model.mask > 0, fold_of, local=_velocity_columns(model, cols))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
+
+
+def _velocity_columns(model, cols) -> np.ndarray | None:
+    """Which of the unknowns ``cols`` are navigation velocities (V<j>_<axis>, per run): each row
+    touches a few neighbouring ones, so their block of the normal matrix is banded."""
+    names = getattr(model, "names", None)
+    if names is None:
+        return None
+    return np.array([VELOCITY_NAME.fullmatch(names[c].split("/")[-1]) is not None for c in cols], dtype=bool)
 
 
 def _gap_rows(model) -> np.ndarray:
@@ -407,10 +420,10 @@ def variance_components(model: GapModel, fit: Fit) -> dict:
     Foerstner variance-component estimation: sigma_g^2 = e_g^T e_g / (n_g - sum of the group's
     leverages)); the random walk's intensity is one of them (REML for a linear-Gaussian walk)."""
     J = as_sparse(fit.jacobian)
-    if fit.free is not None:
-        J = J[:, np.flatnonzero(fit.free)]
+    cols = np.flatnonzero(fit.free) if fit.free is not None else np.arange(J.shape[1])
+    J = J[:, cols]
     used = model.mask > 0
-    r = redundancy(J, model.row_sigma, used, len(model.sigma_keys))
+    r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=_velocity_columns(model, cols))
     out = dict(fit.sigma)
     for i, key in enumerate(model.sigma_keys):
         m = (model.row_sigma == i) & used

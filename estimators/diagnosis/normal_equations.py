@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 from scipy.sparse.linalg import splu
 
 CHUNK = 2048  # right-hand sides solved at once (memory: CHUNK x unknowns doubles)
 RIDGE = 1e-10  # relative damping of J^T J's diagonal: an unknown no row determines stays put, never NaN
+MAX_BAND = 8  # widest band of the local block (velocities per ping) the selected inversion takes
 
 
 def as_sparse(J) -> sp.csr_matrix:
@@ -23,9 +25,81 @@ def as_sparse(J) -> sp.csr_matrix:
 
 def factor(A: sp.spmatrix, relative_ridge: float = RIDGE):
     """Sparse LU of a normal matrix with a relative ridge on its diagonal."""
+    return splu(ridged(A, relative_ridge))
+
+
+def ridged(A: sp.spmatrix, relative_ridge: float = RIDGE) -> sp.csc_matrix:
     d = np.asarray(A.diagonal()).ravel()
-    A = A + sp.diags(relative_ridge * np.maximum(d, 1e-12))
-    return splu(sp.csc_matrix(A))
+    return sp.csc_matrix(A + sp.diags(relative_ridge * np.maximum(d, 1e-12)))
+
+
+def leverages(A: sp.spmatrix, J, local: np.ndarray | None = None) -> np.ndarray:
+    """diag(J A^-1 J^T), A symmetric positive definite (ridge included). With ``local`` (columns
+    each row touches a few neighbours of: the velocities per ping) by selected inversion of the
+    banded local block and a Schur complement on the rest (:func:`arrow_leverages`, linear in the
+    pings); otherwise, or when the band is wide, by solves against a sparse LU."""
+    J = as_sparse(J)
+    if local is not None and np.any(local):
+        h = arrow_leverages(A, J, np.asarray(local, dtype=bool))
+        if h is not None:
+            return h
+    return quadratic_diagonal(splu(sp.csc_matrix(A)), J)
+
+
+def arrow_leverages(A: sp.spmatrix, J: sp.csr_matrix, local: np.ndarray) -> np.ndarray | None:
+    """diag(J A^-1 J^T) for A = [[B, C], [C^T, D]] with B (the ``local`` columns) banded:
+    a J_L B^-1 J_L^T a (the band of B^-1 by Takahashi's recurrences on B's banded Cholesky factor)
+    plus u S^-1 u^T, u = J_G - J_L B^-1 C, S = D - C^T B^-1 C. None when B's band is wider than
+    :data:`MAX_BAND` or B is not positive definite (the caller then solves)."""
+    loc, glob = np.flatnonzero(local), np.flatnonzero(~local)
+    A = sp.csc_matrix(A)
+    B = A[loc][:, loc].tocoo()
+    p = int(np.max(np.abs(B.row - B.col))) if B.nnz else 0
+    if p > MAX_BAND:
+        return None
+    n = loc.size
+    lower = B.row >= B.col
+    ab = np.zeros((p + 1, n))
+    np.add.at(ab, (B.row[lower] - B.col[lower], B.col[lower]), B.data[lower])
+    try:
+        Lb = cholesky_banded(ab, lower=True)
+    except LinAlgError:
+        return None
+    zb = band_of_inverse(Lb)
+    Z = sp.diags([zb[d, :n - d] for d in range(p + 1)] + [zb[d, :n - d] for d in range(1, p + 1)],
+                 list(range(0, -p - 1, -1)) + list(range(1, p + 1)), shape=(n, n), format="csr")
+    JL = J[:, loc]
+    h = np.asarray(JL.multiply(JL @ Z).sum(axis=1)).ravel()
+    if glob.size:
+        C = A[loc][:, glob].toarray()
+        BC = cho_solve_banded((Lb, True), C)
+        S = A[glob][:, glob].toarray() - C.T @ BC
+        U = J[:, glob].toarray() - JL @ BC
+        h += np.sum((U @ np.linalg.pinv(S, hermitian=True)) * U, axis=1)
+    return h
+
+
+def band_of_inverse(Lb: np.ndarray) -> np.ndarray:
+    """The band of (L L^T)^-1 from L in lower banded storage (Lb[d, j] = L[j + d, j]), same
+    storage, by Takahashi's recurrences (L^T Z = L^-1, upper part zero): for j from the last,
+    Z[j, i] = (delta_ij / L_jj - sum_k L_kj Z_ki) / L_jj, k = j+1..j+p, i = j+p..j."""
+    p, n = Lb.shape[0] - 1, Lb.shape[1]
+    zb = np.zeros_like(Lb)
+    grids = {}
+    for j in range(n - 1, -1, -1):
+        m, Ljj = min(p, n - 1 - j), Lb[0, j]
+        if m == 0:
+            zb[0, j] = 1.0 / Ljj**2
+            continue
+        if m not in grids:
+            a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+            grids[m] = (np.abs(a - b), np.minimum(a, b))
+        dist, low = grids[m]
+        w = Lb[1:m + 1, j]
+        row = -(w @ zb[dist, j + 1 + low]) / Ljj  # Z[j, j+1..j+m]
+        zb[1:m + 1, j] = row
+        zb[0, j] = (1.0 / Ljj - w @ row) / Ljj
+    return zb
 
 
 def quadratic_diagonal(lu, J: sp.csr_matrix) -> np.ndarray:
@@ -38,22 +112,23 @@ def quadratic_diagonal(lu, J: sp.csr_matrix) -> np.ndarray:
     return out
 
 
-def leave_out_predictions(J, e: np.ndarray, used: np.ndarray, fold_of: np.ndarray, damping: float = 1e-6) -> np.ndarray:
+def leave_out_predictions(J, e: np.ndarray, used: np.ndarray, fold_of: np.ndarray, damping: float = 1e-6,
+                          local: np.ndarray | None = None) -> np.ndarray:
     """Weighted residuals of each fold predicted with that fold left out, divided by
-    sqrt(1 + leverage): one Gauss-Newton step from the full fit (see ``_cv_residuals``)."""
+    sqrt(1 + leverage): one Gauss-Newton step from the full fit (see ``_cv_residuals``).
+    ``local``: the columns :func:`leverages` may invert by their band."""
     J = as_sparse(J)
     Ju_all = J[np.flatnonzero(used)]
-    A_all = (Ju_all.T @ Ju_all).tocsc()
-    A_all = A_all + sp.diags(damping * np.maximum(np.asarray(A_all.diagonal()).ravel(), 1e-12))
+    A_all = ridged((Ju_all.T @ Ju_all).tocsc(), damping)
     b_all = Ju_all.T @ e[used]
     pred = np.zeros_like(e)
     for k in np.unique(fold_of):
         out = fold_of == k
         Jo = J[np.flatnonzero(out)]
         Ju = J[np.flatnonzero(out & used)]
-        lu = factor(A_all - Ju.T @ Ju, 0.0)
-        step = -lu.solve(b_all - Ju.T @ e[out & used])
-        leverage = quadratic_diagonal(lu, Jo)
+        A = sp.csc_matrix(A_all - Ju.T @ Ju)
+        step = -splu(A).solve(b_all - Ju.T @ e[out & used])
+        leverage = leverages(A, Jo, local)
         pred[out] = (e[out] + Jo @ step) / np.sqrt(1.0 + np.maximum(leverage, 0.0))
     return pred
 
@@ -76,13 +151,13 @@ def marginal_covariance(J, index, s2: float = 1.0) -> np.ndarray:
     return s2 * 0.5 * (C + C.T)
 
 
-def redundancy(J, row_group: np.ndarray, used: np.ndarray, n_groups: int) -> np.ndarray:
+def redundancy(J, row_group: np.ndarray, used: np.ndarray, n_groups: int, local: np.ndarray | None = None) -> np.ndarray:
     """Redundancy of each group of rows, r_g = n_g - sum of its rows' leverages (the degrees of
     freedom its residuals carry: Helmert / Foerstner variance-component estimation)."""
     J = as_sparse(J)
     rows = np.flatnonzero(used)
     Ju = J[rows]
-    h = quadratic_diagonal(factor((Ju.T @ Ju).tocsc()), Ju)
+    h = leverages(ridged((Ju.T @ Ju).tocsc()), Ju, local)
     r = np.zeros(n_groups)
     np.add.at(r, row_group[rows], 1.0 - np.clip(h, 0.0, 1.0))
     return r
