@@ -17,7 +17,7 @@ from adcpdyn.models.effects import CATALOG, get_effect
 from adcpdyn.cases.simulation import simulate
 
 ISSUE_EFFECTS = {"attitude_latency", "sound_speed_error", "beam_angle_error", "heave", "surge", "forced_roll",
-                 "compass_deviation", "tilt_lowpass", "moving_bed", "reference_lever_arm", "reference_latency",
+                 "compass_deviation", "compass_offset", "tilt_lowpass", "moving_bed", "reference_lever_arm", "reference_latency",
                  "installation_misalignment", "deep_water_timing"}
 
 

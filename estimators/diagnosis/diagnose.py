@@ -455,6 +455,10 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
         return False, ("not observable: a sensor inside the head turns with the head, so the beams' attitude does not "
                        "depend on how the head sits in the vessel (notes on the paper, erratum 5); its heading against "
                        "the reference is the base's heading misalignment")
+    if name == "compass_offset" and base.spec.installation == "estimate":
+        return False, "part of the base: a constant heading error turns the beams as the installation yaw it estimates"
+    if name == "compass_offset" and base.spec.heading != "off" and "heading_misalignment" not in base.pins.values:
+        return False, "part of the base: the heading misalignment it estimates against the reference is a constant heading error"
     if name == "reference_latency" and any(r.navigation == "random_walk" for r in base.runs):
         return False, ("needs a smooth navigation (--navigation knots): with a velocity at every ping, shifting the "
                        "reference trades against the walk's ping-to-ping steps instead of a delay")

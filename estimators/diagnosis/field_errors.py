@@ -14,7 +14,7 @@ import numpy as np
 from ...cases.case import Case
 
 FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
-    "compass_offset_deg": ("compass_deviation", "deg", (2.0, 4.0)),
+    "compass_offset_deg": ("compass_offset", "deg", (2.0, 4.0)),
     "attitude_latency_s": ("attitude_latency", "s", (0.3, 1.0)),
     "reference_latency_s": ("reference_latency", "s", (0.5, 2.0)),
     "moving_bed_m_s": ("moving_bed", "m/s", (0.1, 0.3)),

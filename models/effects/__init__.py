@@ -10,6 +10,7 @@ from .attitude_latency import AttitudeLatency
 from .base import Effect, Parameter
 from .beam_angle_error import BeamAngleError
 from .compass_deviation import CompassDeviation
+from .compass_offset import CompassOffset
 from .deep_water_timing import DeepWaterTiming
 from .forced_roll import ForcedRoll
 from .heave import Heave
@@ -22,7 +23,7 @@ from .surge import Surge
 from .tilt_lowpass import TiltLowpass
 
 CATALOG: dict[str, Effect] = {e.name: e for e in (
-    AttitudeLatency(), SoundSpeedError(), BeamAngleError(), Heave(), Surge(), ForcedRoll(), CompassDeviation(),
+    AttitudeLatency(), SoundSpeedError(), BeamAngleError(), Heave(), Surge(), ForcedRoll(), CompassOffset(), CompassDeviation(),
     TiltLowpass(), MovingBed(), ReferenceLeverArm(), ReferenceLatency(), InstallationMisalignment(), DeepWaterTiming(),
 )}
 
