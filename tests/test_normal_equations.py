@@ -189,8 +189,16 @@ def test_field_errors_are_written_on_the_recorded_channels():
     assert abs(u[0] @ v) < 1e-9 and v[0] * u[0, 1] - v[1] * u[0, 0] < 0  # across the course, to port (course - 90 deg)
     fast = inject(case, "sound_speed_relative", 0.03)
     np.testing.assert_allclose(fast.pings.bt_radial_m_s, 1.03 * case.pings.bt_radial_m_s)
+    slow = inject(case, "tilt_lowpass_s", 1.0)
+    np.testing.assert_array_equal(slow.attitude.heading_rad, case.attitude.heading_rad)
+    assert np.std(slow.attitude.roll_rad) < np.std(case.attitude.roll_rad)
+    heave = inject(case, "heave_m_s", 0.1)
+    c = np.cos(case.instrument.beam_angle_rad)
+    dr = heave.pings.bt_radial_m_s - case.pings.bt_radial_m_s
+    np.testing.assert_allclose(dr, dr[:, :1] * np.ones((1, 4)))  # the same vertical velocity on every beam
+    assert np.max(np.abs(dr)) == pytest.approx(0.1 * c, rel=0.01)
     assert set(FIELD_ERRORS) == {"compass_offset_deg", "attitude_latency_s", "reference_latency_s", "moving_bed_m_s",
-                                 "sound_speed_relative"}
+                                 "sound_speed_relative", "tilt_lowpass_s", "heave_m_s"}
     with pytest.raises(ValueError, match="error: expected one of"):
         inject(case, "compass", 1.0)
     with pytest.raises(ValueError, match="needs a moving reference"):
@@ -219,6 +227,19 @@ def test_colour_factor_is_one_for_white_gains_and_large_for_a_slow_wander():
         factors.append(_colour_factor(model, fit, model, ref, {(0, "bt"): 1.0}))
     assert 1.0 <= factors[0] < 1.3
     assert 4.0 < factors[1] < 10.0
+
+
+def test_lowpass_of_samples_matches_the_closed_form_step_and_ramp_responses():
+    """The injected tilt low-pass against closed forms: a ramp x = t gives y = t - tau (1 - exp(-t/tau)),
+    on irregular sample times; a constant passes unchanged."""
+    from adcpdyn.estimators.diagnosis.field_errors import lowpass
+
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.uniform(0.2, 0.9, 200))
+    t -= t[0]
+    tau = 0.8
+    np.testing.assert_allclose(lowpass(t, t, tau), t - tau * (1 - np.exp(-t / tau)), atol=1e-12)
+    np.testing.assert_allclose(lowpass(t, np.full(t.size, 0.3), tau), 0.3)
 
 
 def test_field_selftest_reports_what_a_file_can_detect(tmp_path):

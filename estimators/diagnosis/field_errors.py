@@ -19,7 +19,10 @@ FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
     "reference_latency_s": ("reference_latency", "s", (0.5, 2.0)),
     "moving_bed_m_s": ("moving_bed", "m/s", (0.1, 0.3)),
     "sound_speed_relative": ("sound_speed_error", "", (0.02, 0.04)),
+    "tilt_lowpass_s": ("tilt_lowpass", "s", (0.5, 1.5)),
+    "heave_m_s": ("heave", "m/s", (0.05, 0.15)),
 }
+HEAVE_OMEGA_RAD_S = 1.0  # the injected heave's frequency (a 6.3-s swell)
 
 
 def inject(case: Case, error: str, size: float) -> Case:
@@ -32,7 +35,12 @@ def inject(case: Case, error: str, size: float) -> Case:
     - moving_bed_m_s: a bed moving at ``size`` across the mean course (to its left): the bottom
       track sees v - u, so the reference, which sees v, gets + u;
     - sound_speed_relative: radials and slant ranges scaled by 1 + size (the instrument's sound
-      speed off by that fraction).
+      speed off by that fraction);
+    - tilt_lowpass_s: pitch and roll samples read through a first-order low-pass of time constant
+      ``size`` (exact for a signal linear between samples);
+    - heave_m_s: the boat heaving at :data:`HEAVE_OMEGA_RAD_S` with vertical velocity amplitude
+      ``size`` (down positive): every radial gains w cos(beam angle), every slant range loses
+      z / cos(beam angle) (the beams' tilt, a few degrees, neglected: cos 4 deg = 0.998).
     """
     if error not in FIELD_ERRORS:
         raise ValueError(f"error: expected one of {sorted(FIELD_ERRORS)}, got {error!r}")
@@ -45,6 +53,16 @@ def inject(case: Case, error: str, size: float) -> Case:
         p = case.pings
         rng = None if p.bt_range_m is None else p.bt_range_m * (1 + size)
         return case.replace(pings=dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s * (1 + size), bt_range_m=rng))
+    if error == "tilt_lowpass_s":
+        return case.replace(attitude=dataclasses.replace(att, pitch_rad=lowpass(att.time_s, att.pitch_rad, size),
+                                                         roll_rad=lowpass(att.time_s, att.roll_rad, size)))
+    if error == "heave_m_s":
+        p, t = case.pings, case.pings.time_s - case.pings.time_s[0]
+        z = size / HEAVE_OMEGA_RAD_S * np.sin(HEAVE_OMEGA_RAD_S * t)
+        w = size * np.cos(HEAVE_OMEGA_RAD_S * t)
+        c = np.cos(case.instrument.beam_angle_rad)
+        rng = None if p.bt_range_m is None else p.bt_range_m - (z / c)[:, None]
+        return case.replace(pings=dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s + (w * c)[:, None], bt_range_m=rng))
     if ref is None or ref.stationary or ref.velocity_m_s is None:
         raise ValueError(f"error: {error} needs a moving reference velocity; {case.name} has none")
     if error == "reference_latency_s":
@@ -53,3 +71,24 @@ def inject(case: Case, error: str, size: float) -> Case:
     course = np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0]))
     u = size * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0])
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
+
+
+def lowpass(t: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:
+    """First-order low-pass y' = (x - y) / tau of samples x(t), x linear between samples (exact
+    first-order-hold discretisation: y_k = a y_k-1 + b0 x_k + b1 x_k-1, a = exp(-h / tau)); NaN
+    samples are held over, the output starts at the first finite sample."""
+    x = np.asarray(x, dtype=float)
+    y = np.full_like(x, np.nan)
+    ok = np.flatnonzero(np.isfinite(x))
+    if ok.size == 0:
+        return y
+    prev_t, prev_x, prev_y = t[ok[0]], x[ok[0]], x[ok[0]]
+    y[ok[0]] = prev_y
+    for k in ok[1:]:
+        h = t[k] - prev_t
+        a = np.exp(-h / tau_s)
+        g = tau_s / h * (1 - a)
+        prev_y = a * prev_y + (1 - g) * x[k] + (g - a) * prev_x
+        prev_t, prev_x = t[k], x[k]
+        y[k] = prev_y
+    return y
