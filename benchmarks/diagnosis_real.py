@@ -6,7 +6,8 @@ each diagnosed with the clean file's own calibration, for both bases (navigation
 Per file, error, size and base: the verdict, whether the injected error's effect is named (top-1),
 the held-out gap and its z, the effect's estimate, and the wall time. Clean files count a false
 alarm when any effect is named. Files come from ``ADCPDYN_REAL_DATA`` (default ../shared/data/real);
-a missing file is listed, not an error.
+a missing file is listed, not an error; ``ADCPDYN_BENCH_NAVIGATION`` (``knots`` or ``random_walk``)
+runs one base only.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def bench_diagnosis(quick: bool) -> dict:
         tic = time.perf_counter()
         calibration = api.calibrate(case, n_starts=8)
         calib_s = time.perf_counter() - tic
-        for nav in NAVIGATIONS:
+        for nav in [n for n in NAVIGATIONS if os.environ.get("ADCPDYN_BENCH_NAVIGATION", n) == n]:
             res = api.field_selftest(case, calibration, navigation=nav, sizes=sizes)
             for r in res["rows"]:
                 rows.append({"file": name, "pings": case.pings.n, "navigation": nav, "calibration_s": calib_s,

@@ -67,9 +67,10 @@ class DiagnosisConfig:
     parameters' variance with a base unknown or a chosen effect is named, not chosen.
 
     On a random-walk base (real files) the BIC is the coloured-residual one (``delta_bic_hac``:
-    the likelihood ratio over the long-run/white variance ratio of its per-bin gains) and the
-    held-out gap need only shrink by ``min_shrink_walk``: a real file keeps structure no catalog
-    effect explains, so a real effect removes a smaller share of the whole gap.
+    the likelihood ratio over the long-run/white variance ratio of its per-bin gains), the gap
+    it works on must be significant (z > ``gap_z``), and the held-out gap need only shrink by
+    ``min_shrink_walk``: a real file keeps structure no catalog effect explains, so a real effect
+    removes a smaller share of the whole gap.
     """
 
     effects: tuple = tuple(CATALOG)
@@ -649,7 +650,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
                         noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
             noise = {k: max(v, 1e-9) for k, v in noise.items()}
             cv["base"] = _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)
-        ref_gap, _ = _gap(current[0], cv[current_name], noise)
+        ref_gap, ref_z = _gap(current[0], cv[current_name], noise)
         scores = []
         for name, (label, model, f) in tried.items():
             cv[label] = _cv_residuals(model, f, config.cv_folds, config.cv_block_s)
@@ -659,7 +660,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             s.confounded_with, s.confounded_share = _confounding(model, f, mine, others, config.confounded_share)
             if walk:
                 s.significant = bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink_walk
-                                     and ref_gap > config.min_gap)
+                                     and ref_gap > config.min_gap and ref_z > config.gap_z)
             else:
                 s.significant = bool(s.delta_bic < -config.bic_margin and s.shrink_fraction >= config.min_shrink
                                      and ref_gap > config.min_gap)
