@@ -262,4 +262,8 @@ def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     assert "| moving_bed_m_s | 0.3 m/s | moving_bed" in format_field_selftest(res)
     written = write_field_selftest(res, tmp_path / "self.json")
     assert all(p.exists() for p in written)
+    # the base that follows the boat (a velocity per ping, coloured-residual BIC) names it too, and not the clean run
+    walk = field_selftest(case, None, DiagnosisConfig(effects=("moving_bed", "attitude_latency"), navigation="random_walk"),
+                          sizes={"moving_bed_m_s": [0.3]})
+    assert [r["verdict"] for r in walk["rows"]] == ["none", "moving_bed"]
     assert main(["diagnose", str(tmp_path / "x.h5"), "--field-selftest"]) == 2  # one line: expects --out
