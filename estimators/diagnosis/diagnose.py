@@ -625,9 +625,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     current_name, current = "base", (base_model, base_fit)
     cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
     walk = base_model.staggered_folds  # a velocity per ping: coloured-residual BIC, smaller shrink share
+    first_gain = {}
     for round_ in range(1, config.max_effects + 1):
         tried = {}
-        todo = [name for name in candidates if name not in selected]
+        # later rounds retry only the effects that improved on the base alone (a BIC gain in round 1)
+        todo = [name for name in candidates if name not in selected and (round_ == 1 or first_gain.get(name, 0.0) < 0)]
         labels = {name: name if round_ == 1 else "+".join(selected + [name]) for name in todo}
 
         def one(name, terms=tuple(selected_terms), start=current[1]):
@@ -667,6 +669,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             scores.append(s)
         scores.sort(key=lambda s: (not s.significant, s.delta_bic_hac if walk else s.delta_bic))
         ranking += scores
+        if round_ == 1:
+            first_gain = {sc.effect: (sc.delta_bic_hac if walk else sc.delta_bic) for sc in scores}
         # an effect the base's unknowns (or a chosen effect) largely stand in for: said in words, whether or not
         # the rest of its signature still carries it
         for sc in scores:
