@@ -266,4 +266,5 @@ def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     walk = field_selftest(case, None, DiagnosisConfig(effects=("moving_bed", "attitude_latency"), navigation="random_walk"),
                           sizes={"moving_bed_m_s": [0.3]})
     assert [r["verdict"] for r in walk["rows"]] == ["none", "moving_bed"]
+    assert "random-walk prior" in walk["rows"][1]["statement"] and "random-walk" not in res["rows"][1]["statement"]
     assert main(["diagnose", str(tmp_path / "x.h5"), "--field-selftest"]) == 2  # one line: expects --out

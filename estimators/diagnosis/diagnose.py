@@ -383,6 +383,9 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
         for group, value in guess.items():
             if group in INDEPENDENT_NOISE or (k, group) not in sigma0:
                 sigma0[(k, group)] = value
+    if any(r.navigation == "random_walk" and r.knots is not None for r in runs):
+        notes.append("vessel velocity at every ping under a random-walk prior, its intensity and the noise levels from "
+                     "the data (variance components)")
     return DiagnosisBase(runs, spec, Pins(pins, "calibration" if calibration is not None else ""), sigma0, notes)
 
 
@@ -748,6 +751,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
                                                             for r in base.runs)),
                  "attitude_source_reason": "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs)),
                  "calibration": base.pins.source or None, "pinned": base.pins.values, "notes": base.notes,
+                 "navigation": config.navigation,
                  "log_likelihood": float(base_fit.log_likelihood(base_model)), "n_observations": n_obs,
                  "skipped_effects": skipped,
                  "unknowns": {n: float(base_fit.x[i]) for i, n in enumerate(base_model.names)
