@@ -596,7 +596,6 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     """
     from .estimators.calibration_record import calibration_dict
     from .estimators.correct_case import as_calibrated_run
-    from .estimators.diagnosis.diagnose import DiagnosisConfig
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
     _choice("fmt", fmt, FIGURE_FORMATS)
@@ -613,8 +612,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     sources = [dataclasses.replace(s, case=as_calibrated_run(s.case, s.path or s.case.name, cal)) for s, _ in prepared]
     sources = _keyed(sources)
     notes = [n for _, ns in prepared for n in ns]
-    config = DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude,
-                             navigation=navigation)
+    config = _diagnosis_config(effects, attitude, navigation)
     run_cases = [s.case for s in sources]
     result = _diagnose(run_cases if many else run_cases[0], config, calibration=cal, progress=progress)
     if notes:
@@ -624,6 +622,14 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
 
         write_report(result, out, fmt=fmt)
     return result
+
+
+def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "knots") -> "DiagnosisConfig":
+    """The diagnosis options the API and the command line expose (the catalog's effects unless named)."""
+    from .estimators.diagnosis.diagnose import DiagnosisConfig
+
+    return DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude,
+                           navigation=navigation)
 
 
 def field_selftest(case, calibration=None, *, navigation: str = "knots", effects=None, attitude: str = "auto",
@@ -653,7 +659,6 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
     """
     from .estimators.calibration_record import calibration_dict
     from .estimators.correct_case import as_calibrated_run
-    from .estimators.diagnosis.diagnose import DiagnosisConfig
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
     _choice("fmt", fmt, FIGURE_FORMATS)
@@ -668,8 +673,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         note = "calibrated on itself (8 starts): no --calibration given"
     cal = calibration_dict(calibration)
     run = as_calibrated_run(src.case, src.path or src.case.name, cal)
-    config = DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude,
-                             navigation=navigation)
+    config = _diagnosis_config(effects, attitude, navigation)
     res = _field_selftest(run, cal, config, sizes=sizes, progress=progress)
     res["notes"] = notes + ([note] if note else [])
     if out is not None:

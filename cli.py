@@ -563,13 +563,12 @@ def _diagnose_selftest(args) -> int:
 
     from .cases.atomic import atomic_path, check_output_file
     from .estimators.calibration import _jsonable
-    from .estimators.diagnosis.diagnose import DiagnosisConfig
+    from .api import _diagnosis_config
     from .estimators.diagnosis.selftest import draw_cases, format_summary, run_one, summarise
 
     if args.out:
         check_output_file(args.out)
-    config = DiagnosisConfig(effects=tuple(args.effects) if args.effects else DiagnosisConfig().effects,
-                             navigation=args.navigation)
+    config = _diagnosis_config(args.effects, navigation=args.navigation)
     platforms = tuple(args.platforms) if args.platforms else None
     draws = draw_cases(args.selftest, args.seed, config.effects, **({"platforms": platforms} if platforms else {}))
     rows = []

@@ -42,6 +42,7 @@ from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE, Attit
                              with_extra_mode)
 from ..models.rotations import course_difference_rad, euler_matrix, unskew
 from ..models.sensors import compass_correction, reference_point_velocity
+from .asc import asc
 from .attitude_fit import AttitudeFit, sampled_attitude
 from .formulations import AXES, lever_block
 from .row_jacobian import RowBlock, RowJacobian
@@ -242,12 +243,25 @@ class RunSetup:
     samples: SampledAttitude | None = field(default=None, init=False)
     reference_rows: np.ndarray | None = field(default=None, init=False)
 
+    @property
+    def random_walk(self) -> bool:
+        """A velocity at every ping under the random-walk prior (a moving run with random_walk)."""
+        return self.navigation == "random_walk" and self.knots is not None
+
+    def noise_guess(self) -> dict:
+        """{group: starting noise level} of this run: :func:`initial_noise`, and the walk's
+        intensity (:func:`random_walk_intensity`) when it walks."""
+        guess = initial_noise(self.case, self.fit, self.attitude_source == "model")
+        if self.random_walk:
+            guess["motion"] = random_walk_intensity(self.case)
+        return guess
+
     def __post_init__(self):
         if self.attitude_source not in ATTITUDE_SOURCES:
             raise ValueError(f"attitude_source: expected one of {list(ATTITUDE_SOURCES)}, got {self.attitude_source!r}")
         if self.navigation not in NAVIGATIONS:
             raise ValueError(f"navigation: expected one of {list(NAVIGATIONS)}, got {self.navigation!r}")
-        if self.navigation == "random_walk" and self.knots is not None and self.knots.size < 2:
+        if self.random_walk and self.knots.size < 2:
             raise ValueError("navigation: 'random_walk' needs at least two knots")
         self.reference_rows = reference_rows(self.case, self.knots)
         if self.attitude_source == "samples":
@@ -309,8 +323,6 @@ def random_walk_intensity(case: Case) -> float:
     """Starting level of the random-walk prior, sqrt(q) in m/s/sqrt(s), from the data: the per-ping
     static (ASC) velocities' increments, whose variance is q dt + 2 var(v) with var(v) from the beams'
     noise (error velocity) through the Janus geometry; horizontal axes, robust (MAD) spread."""
-    from .asc import asc
-
     v = asc(case).vessel_velocity_m_s[:, :2]
     t = case.pings.time_s
     ok = np.all(np.isfinite(v), axis=1)
@@ -702,7 +714,7 @@ class SurveyModel:
                     models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
                     channels.append(Channel(k, f"reference_{NED[j]}", t_ref, (np.isfinite(v_meas[:, j]) & covered).astype(float)))
                 n_nodes += att_c.n_instructions() * L
-            if run.navigation == "random_walk" and V is not None:  # the random-walk prior: increments over sqrt(dt)
+            if run.random_walk:  # the random-walk prior: increments over sqrt(dt)
                 dt = np.diff(run.knots)
                 t_mid = 0.5 * (run.knots[1:] + run.knots[:-1])
                 dV = ca.times(V[1:, :] - V[:-1, :], ca.DM(np.repeat(1.0 / np.sqrt(dt)[:, None], 3, axis=1)))
@@ -748,9 +760,7 @@ class SurveyModel:
         """{(run, group): noise level} from independent estimates (:func:`initial_noise`)."""
         out = {}
         for k, run in enumerate(self.runs):
-            guess = initial_noise(run.case, run.fit, run.attitude_source == "model")
-            if run.navigation == "random_walk":
-                guess["motion"] = random_walk_intensity(run.case)
+            guess = run.noise_guess()
             for key in self.sigma_keys:
                 if key[0] == k:
                     out[key] = guess.get(key[1], 0.02)

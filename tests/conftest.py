@@ -6,6 +6,7 @@ import dataclasses
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from adcpdyn.cases.scenario import Noise, get_scenario
@@ -16,6 +17,15 @@ def noise_free(scenario):
     zero = Noise(bt_m_s=0.0, bt_fraction=0.0, bt_dropout_probability=0.0, range_m=0.0, range_fraction=0.0,
                  water_m_s=0.0, tilt_rad=0.0, heading_rad=0.0, attitude_resolution_rad=0.0, reference_m_s=0.0)
     return dataclasses.replace(scenario, run=dataclasses.replace(scenario.run, noise=zero))
+
+
+def refit_without(A, y, train):
+    """The closed form a leave-fold-out prediction must equal: the linear least-squares refit on the
+    ``train`` rows, its residuals on the others over sqrt(1 + h), h = a (A_t^T A_t)^-1 a^T."""
+    out = ~train
+    x = np.linalg.lstsq(A[train], y[train], rcond=None)[0]
+    h = np.einsum("ij,jk,ik->i", A[out], np.linalg.inv(A[train].T @ A[train]), A[out])
+    return (A[out] @ x - y[out]) / np.sqrt(1 + h)
 
 
 def with_doppler(scenario, **changes):

@@ -41,7 +41,7 @@ from ..attitude_fit import fit_attitude
 from ..calibration import ATTITUDES, choose_attitude
 from ..hac import andrews_lags, newey_west
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
-                                 initial_noise, knot_times, ping_knots, random_walk_intensity)
+                                 knot_times, ping_knots)
 from . import where as where_mod
 from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, residual_peaks
 from .normal_equations import as_sparse, leave_out_predictions, marginal_covariance, redundancy
@@ -193,7 +193,7 @@ def _folds(model, folds: int, block_s: float) -> np.ndarray:
         edges = np.linspace(t.min(), t.max() + 1e-9, n_blocks + 1)
         fold_of[rows] = (np.searchsorted(edges, t, side="right") - 1 + offset) % folds
         offset += n_blocks
-    if getattr(model, "staggered_folds", False):  # each channel group of a block held out in a fold of its own
+    if getattr(model, "random_walk", False):  # each channel group of a block held out in a fold of its own
         groups = list(dict.fromkeys(k[1] for k in model.sigma_keys))
         shift = np.array([groups.index(k[1]) for k in model.sigma_keys])[model.row_sigma]
         fold_of = (fold_of + shift) % folds
@@ -214,17 +214,21 @@ def _cv_residuals(model, fit, folds: int, block_s: float, fold_of: np.ndarray | 
     unit chi-square whatever its number of unknowns (navigation knots, angles), so the gap
     measures misfit, not the model's flexibility.
     """
-    J = as_sparse(fit.jacobian)
-    cols = np.arange(J.shape[1])
-    if getattr(fit, "free", None) is not None:  # a pinned unknown or one at its bound stays put
-        cols = np.flatnonzero(fit.free)
-        J = J[:, cols]
+    J, cols = _free_jacobian(fit)  # a pinned unknown or one at its bound stays put
     w = model.weights(fit.sigma)
     e = w * fit.raw
     fold_of = _folds(model, folds, block_s) if fold_of is None else fold_of
     pred = leave_out_predictions(J, e, model.mask > 0, fold_of, local=_velocity_columns(model, cols))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
+
+
+def _free_jacobian(fit) -> tuple:
+    """The fit's weighted-residual Jacobian (scipy sparse) on its free unknowns, and their columns."""
+    J = as_sparse(fit.jacobian)
+    free = getattr(fit, "free", None)
+    cols = np.flatnonzero(free) if free is not None else np.arange(J.shape[1])
+    return J[:, cols], cols
 
 
 def _velocity_columns(model, cols) -> np.ndarray | None:
@@ -256,7 +260,7 @@ def _gap(model: GapModel, raw: np.ndarray, sigma: dict) -> tuple[float, float]:
     m = _gap_rows(model)
     s = np.array([sigma[k] for k in model.sigma_keys])[model.row_sigma]
     z2 = (raw / s) ** 2
-    if not getattr(model, "staggered_folds", False):
+    if not getattr(model, "random_walk", False):
         chi2 = float(np.mean(z2[m]))
         return chi2 - 1.0, (chi2 - 1.0) * np.sqrt(int(m.sum()) / 2.0)
     group_names = np.array([k[1] for k in model.sigma_keys])[model.row_sigma]
@@ -273,16 +277,14 @@ def _covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
     """Covariance of the scaled unknowns ``index`` (a pinned one or one at its bound: zero),
     scaled by the fit's chi-square."""
     index = np.asarray(index, dtype=int)
-    free = fit.free if fit.free is not None else np.ones(len(model.names), dtype=bool)
-    m = int((model.mask > 0).sum())
-    dof = max(m - int(free.sum()), 1)
+    J, cols = _free_jacobian(fit)
+    dof = max(int((model.mask > 0).sum()) - cols.size, 1)
     s2 = 2.0 * fit.objective / dof
-    cols = np.flatnonzero(free)
     position = {c: j for j, c in enumerate(cols)}
     inside = [j for j, i in enumerate(index) if i in position]
     C = np.zeros((index.size, index.size))
     if inside:
-        sub = marginal_covariance(as_sparse(fit.jacobian)[:, cols], [position[index[j]] for j in inside], s2)
+        sub = marginal_covariance(J, [position[index[j]] for j in inside], s2)
         C[np.ix_(inside, inside)] = sub
     return C
 
@@ -377,13 +379,10 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
                      yaw_centre_rad=course_offset_rad(runs) if installation == "estimate" or heading != "off" else 0.0,
                      heading=heading, moving_bed=moving_bed)
     for k, run in enumerate(runs):
-        guess = initial_noise(run.case, run.fit, run.attitude_source == "model")
-        if run.navigation == "random_walk" and run.knots is not None:
-            guess["motion"] = random_walk_intensity(run.case)
-        for group, value in guess.items():
+        for group, value in run.noise_guess().items():
             if group in INDEPENDENT_NOISE or (k, group) not in sigma0:
                 sigma0[(k, group)] = value
-    if any(r.navigation == "random_walk" and r.knots is not None for r in runs):
+    if any(r.random_walk for r in runs):
         notes.append("vessel velocity at every ping under a random-walk prior, its intensity and the noise levels from "
                      "the data (variance components)")
     return DiagnosisBase(runs, spec, Pins(pins, "calibration" if calibration is not None else ""), sigma0, notes)
@@ -406,7 +405,7 @@ def fit_base(cases, config: DiagnosisConfig, calibration: dict | None = None):
         x0 = model.solve(x0, base.sigma0, fixed=held).x
     fit = model.solve(x0, base.sigma0)
     sigma = dict(base.sigma0)
-    if model.staggered_folds:  # a velocity per ping: every noise level and the walk's intensity from the data
+    if model.random_walk:  # a velocity per ping: every noise level and the walk's intensity from the data
         for _ in range(VCE_ITERATIONS):
             sigma = variance_components(model, fit)
             fit = model.solve(fit.x, sigma)
@@ -423,9 +422,7 @@ def variance_components(model: GapModel, fit: Fit) -> dict:
     """Each (run, group)'s noise level from the fit's residuals over their redundancy (Helmert /
     Foerstner variance-component estimation: sigma_g^2 = e_g^T e_g / (n_g - sum of the group's
     leverages)); the random walk's intensity is one of them (REML for a linear-Gaussian walk)."""
-    J = as_sparse(fit.jacobian)
-    cols = np.flatnonzero(fit.free) if fit.free is not None else np.arange(J.shape[1])
-    J = J[:, cols]
+    J, cols = _free_jacobian(fit)
     used = model.mask > 0
     r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=_velocity_columns(model, cols))
     out = dict(fit.sigma)
@@ -463,7 +460,7 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
         return False, "part of the base: a constant heading error turns the beams as the installation yaw it estimates"
     if name == "compass_offset" and base.spec.heading != "off" and "heading_misalignment" not in base.pins.values:
         return False, "part of the base: the heading misalignment it estimates against the reference is a constant heading error"
-    if name == "reference_latency" and any(r.navigation == "random_walk" for r in base.runs):
+    if name == "reference_latency" and any(r.random_walk for r in base.runs):
         return False, ("needs a smooth navigation (--navigation knots): with a velocity at every ping, shifting the "
                        "reference trades against the walk's ping-to-ping steps instead of a delay")
     if name == "deep_water_timing" and base.runs[0].timing != "shallow":
@@ -627,7 +624,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     selected_terms, selected, confounded, ranking, alternatives = [], [], [], [], []
     current_name, current = "base", (base_model, base_fit)
     cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
-    walk = base_model.staggered_folds  # a velocity per ping: coloured-residual BIC, smaller shrink share
+    walk = base_model.random_walk  # a velocity per ping: coloured-residual BIC, smaller shrink share
+
+    def gain(s: EffectScore) -> float:  # the BIC change that decides: coloured-residual on a random-walk base
+        return s.delta_bic_hac if walk else s.delta_bic
+
     first_gain = {}
     for round_ in range(1, config.max_effects + 1):
         tried = {}
@@ -649,7 +650,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             fits[labels[name]] = (model, f)
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
             for model, f in [v[1:] for v in tried.values()] + [(base_model, base_fit)]:
-                levels = variance_components(model, f) if model.staggered_folds else _group_sigma(model, f.raw)
+                levels = variance_components(model, f) if model.random_walk else _group_sigma(model, f.raw)
                 for key, value in levels.items():
                     if key[1] not in PRIOR_GROUPS:  # the walk's intensity is the base's, not a floor
                         noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
@@ -664,20 +665,20 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             others = against + [n for n in model.effect_names if n not in mine]
             s.confounded_with, s.confounded_share = _confounding(model, f, mine, others, config.confounded_share)
             if walk:
-                s.significant = bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink_walk
+                s.significant = bool(gain(s) < -config.bic_margin and s.shrink_fraction >= config.min_shrink_walk
                                      and ref_gap > config.min_gap and ref_z > config.gap_z)
             else:
-                s.significant = bool(s.delta_bic < -config.bic_margin and s.shrink_fraction >= config.min_shrink
+                s.significant = bool(gain(s) < -config.bic_margin and s.shrink_fraction >= config.min_shrink
                                      and ref_gap > config.min_gap)
             scores.append(s)
-        scores.sort(key=lambda s: (not s.significant, s.delta_bic_hac if walk else s.delta_bic))
+        scores.sort(key=lambda s: (not s.significant, gain(s)))
         ranking += scores
         if round_ == 1:
-            first_gain = {sc.effect: (sc.delta_bic_hac if walk else sc.delta_bic) for sc in scores}
+            first_gain = {sc.effect: gain(sc) for sc in scores}
         # an effect the base's unknowns (or a chosen effect) largely stand in for: said in words, whether or not
         # the rest of its signature still carries it
         for sc in scores:
-            if sc.confounded_with and (sc.delta_bic_hac if walk else sc.delta_bic) < -config.bic_margin and sc.effect not in [c["effect"] for c in confounded]:
+            if sc.confounded_with and gain(sc) < -config.bic_margin and sc.effect not in [c["effect"] for c in confounded]:
                 confounded.append({"effect": sc.effect, "with": sc.confounded_with, "shared_variance": sc.confounded_share,
                                    "chosen": sc.significant, "statement": _reason(sc.effect, sc.confounded_with, base)})
         best = next((s for s in scores if s.significant), None)

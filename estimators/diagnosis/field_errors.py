@@ -23,6 +23,7 @@ FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
     "heave_m_s": ("heave", "m/s", (0.05, 0.15)),
 }
 HEAVE_OMEGA_RAD_S = 1.0  # the injected heave's frequency (a 6.3-s swell)
+NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 
 
 def inject(case: Case, error: str, size: float) -> Case:
@@ -44,6 +45,8 @@ def inject(case: Case, error: str, size: float) -> Case:
     """
     if error not in FIELD_ERRORS:
         raise ValueError(f"error: expected one of {sorted(FIELD_ERRORS)}, got {error!r}")
+    if error in NEEDS_REFERENCE and not has_moving_reference(case):
+        raise ValueError(f"error: {error} needs a moving reference velocity; {case.name} has none")
     att, ref = case.attitude, case.reference
     if error == "compass_offset_deg":
         return case.replace(attitude=dataclasses.replace(att, heading_rad=att.heading_rad + np.radians(size)))
@@ -63,14 +66,18 @@ def inject(case: Case, error: str, size: float) -> Case:
         c = np.cos(case.instrument.beam_angle_rad)
         rng = None if p.bt_range_m is None else p.bt_range_m - (z / c)[:, None]
         return case.replace(pings=dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s + (w * c)[:, None], bt_range_m=rng))
-    if ref is None or ref.stationary or ref.velocity_m_s is None:
-        raise ValueError(f"error: {error} needs a moving reference velocity; {case.name} has none")
     if error == "reference_latency_s":
         return case.replace(reference=dataclasses.replace(ref, time_s=ref.time_s + size))
     v = ref.velocity_m_s
     course = np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0]))
     u = size * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0])
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
+
+
+def has_moving_reference(case: Case) -> bool:
+    """Whether the run carries a moving reference velocity (what :data:`NEEDS_REFERENCE` write into)."""
+    ref = case.reference
+    return ref is not None and not ref.stationary and ref.velocity_m_s is not None
 
 
 def lowpass(t: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:

@@ -12,7 +12,7 @@ import numpy as np
 
 from ...cases.case import Case
 from .diagnose import DiagnosisConfig, diagnose
-from .field_errors import FIELD_ERRORS, inject
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, has_moving_reference, inject
 
 
 def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig = DiagnosisConfig(),
@@ -26,10 +26,9 @@ def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig
     run's verdict (anything named there is a false alarm or the file's own effect).
     """
     sizes = sizes or {e: spec[2] for e, spec in FIELD_ERRORS.items()}
-    needs_reference = {"reference_latency_s", "moving_bed_m_s"}
-    moving = case.reference is not None and not case.reference.stationary and case.reference.velocity_m_s is not None
+    moving = has_moving_reference(case)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
-                                 if moving or e not in needs_reference]
+                                 if moving or e not in NEEDS_REFERENCE]
     rows = []
     for error, size in trials:
         run = case if error == "clean" else inject(case, error, size)
@@ -45,7 +44,7 @@ def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
     return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": config.navigation,
-            "skipped": sorted(needs_reference & set(sizes)) if not moving else []}
+            "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
 
 
 def summarise(rows: list) -> dict:

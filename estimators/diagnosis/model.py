@@ -121,7 +121,7 @@ class GapModel:
         n_data = sum(n for _, n in self.channels)
         self.mask, self.times, self.row_run = model.mask, model.row_time, model.row_run
         self.sigma_keys, self.row_sigma = model.sigma_keys, model.row_sigma
-        self.staggered_folds = any(r.navigation == "random_walk" and r.knots is not None for r in base.runs)
+        self.random_walk = any(r.random_walk for r in base.runs)  # a velocity per ping somewhere
         self.groups_present = list(dict.fromkeys(k[1] for k in self.sigma_keys))
         if model.raw.shape[0] != n_data:
             raise ValueError("diagnosis: the base carries no prior (its heading deviation is pinned or absent)")

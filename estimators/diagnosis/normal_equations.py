@@ -3,8 +3,10 @@ predictions, marginal covariances and variance components, from the weighted res
 Jacobian J (rows x free unknowns) without ever forming (J^T J)^-1.
 
 A base whose navigation is a velocity per ping (random walk) has thousands of unknowns, each
-touching a few rows: J^T J is sparse (block-tridiagonal in the velocities plus a few dense
-columns), so one sparse LU factor and solves against the rows needed replace the dense inverse.
+touching a few rows: J^T J is banded in the velocities plus a few dense columns, so the leverages
+come from the band of the velocities' inverse and a Schur complement on the rest (linear in the
+pings); solves against one sparse LU serve the few columns of a covariance block, and any matrix
+whose band is wide.
 """
 
 from __future__ import annotations
@@ -33,17 +35,18 @@ def ridged(A: sp.spmatrix, relative_ridge: float = RIDGE) -> sp.csc_matrix:
     return sp.csc_matrix(A + sp.diags(relative_ridge * np.maximum(d, 1e-12)))
 
 
-def leverages(A: sp.spmatrix, J, local: np.ndarray | None = None) -> np.ndarray:
+def leverages(A: sp.spmatrix, J, local: np.ndarray | None = None, lu=None) -> np.ndarray:
     """diag(J A^-1 J^T), A symmetric positive definite (ridge included). With ``local`` (columns
     each row touches a few neighbours of: the velocities per ping) by selected inversion of the
     banded local block and a Schur complement on the rest (:func:`arrow_leverages`, linear in the
-    pings); otherwise, or when the band is wide, by solves against a sparse LU."""
+    pings); otherwise, or when the band is wide, by solves against a sparse LU (``lu`` when the
+    caller has factored A already)."""
     J = as_sparse(J)
     if local is not None and np.any(local):
         h = arrow_leverages(A, J, np.asarray(local, dtype=bool))
         if h is not None:
             return h
-    return quadratic_diagonal(splu(sp.csc_matrix(A)), J)
+    return quadratic_diagonal(lu if lu is not None else splu(sp.csc_matrix(A)), J)
 
 
 def arrow_leverages(A: sp.spmatrix, J: sp.csr_matrix, local: np.ndarray) -> np.ndarray | None:
@@ -127,8 +130,9 @@ def leave_out_predictions(J, e: np.ndarray, used: np.ndarray, fold_of: np.ndarra
         Jo = J[np.flatnonzero(out)]
         Ju = J[np.flatnonzero(out & used)]
         A = sp.csc_matrix(A_all - Ju.T @ Ju)
-        step = -splu(A).solve(b_all - Ju.T @ e[out & used])
-        leverage = leverages(A, Jo, local)
+        lu = splu(A)
+        step = -lu.solve(b_all - Ju.T @ e[out & used])
+        leverage = leverages(A, Jo, local, lu)
         pred[out] = (e[out] + Jo @ step) / np.sqrt(1.0 + np.maximum(leverage, 0.0))
     return pred
 
