@@ -558,7 +558,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png") -> Comparison
 
 # ----------------------------------------------------------------------------------------------- diagnose
 def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", navigation: str = "knots",
-             out=None, fmt: str = "png", progress: Callable[[str], None] | None = None) -> "DiagnosisResult":
+             given=(), out=None, fmt: str = "png", progress: Callable[[str], None] | None = None) -> "DiagnosisResult":
     """Where the sim-to-real gap of a run lies, which unmodelled effect causes it, how far it shrinks.
 
     Parameters
@@ -576,6 +576,10 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         The base's vessel velocity: a velocity at every ping tied by a random-walk prior whose
         intensity the data set (a real boat's ping-to-ping speed changes are motion), or a
         piecewise-linear curve through knots (smooth simulated courses).
+    given : sequence of str, optional
+        Effects the run is known to carry (e.g. what its clean run named): fitted first and kept
+        in every model, so the candidates are judged on top of them (``result.given`` holds
+        their estimates).
     out : str or os.PathLike, optional
         DIAG.json; DIAG.md and a residual figure are written beside it.
     fmt : {'png', 'pdf', 'svg'}
@@ -612,7 +616,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     sources = [dataclasses.replace(s, case=as_calibrated_run(s.case, s.path or s.case.name, cal)) for s, _ in prepared]
     sources = _keyed(sources)
     notes = [n for _, ns in prepared for n in ns]
-    config = _diagnosis_config(effects, attitude, navigation)
+    config = _diagnosis_config(effects, attitude, navigation, given)
     run_cases = [s.case for s in sources]
     result = _diagnose(run_cases if many else run_cases[0], config, calibration=cal, progress=progress)
     if notes:
@@ -624,12 +628,12 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     return result
 
 
-def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "knots") -> "DiagnosisConfig":
+def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "knots", given=()) -> "DiagnosisConfig":
     """The diagnosis options the API and the command line expose (the catalog's effects unless named)."""
     from .estimators.diagnosis.diagnose import DiagnosisConfig
 
     return DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude,
-                           navigation=navigation)
+                           navigation=navigation, given=tuple(given or ()))
 
 
 def field_selftest(case, calibration=None, *, navigation: str = "knots", effects=None, attitude: str = "auto",

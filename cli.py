@@ -512,6 +512,9 @@ def cmd_demo(args) -> int:
 
 
 def cmd_diagnose(args) -> int:
+    if args.given and (args.selftest or args.field_selftest):
+        raise ValueError("diagnose: --given names a run's own effects; --selftest and --field-selftest find them "
+                         "themselves (drop --given)")
     if args.selftest:
         return _diagnose_selftest(args)
     if args.field_selftest:
@@ -530,7 +533,7 @@ def cmd_diagnose(args) -> int:
     check_output_file(args.out, *paths, args.calibration)
     progress = _DiagnosisProgress("diagnose", len(paths))
     result = diagnose(paths if args.joint else paths[0], args.calibration, effects=args.effects, attitude=args.attitude,
-                      navigation=args.navigation, progress=progress.fitted_model)
+                      navigation=args.navigation, given=args.given, progress=progress.fitted_model)
     progress(f"done: verdict {result.verdict}")
     for w in result.base.get("case_warnings", []):
         print(f"warning: {w}")
@@ -773,6 +776,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--attitude", default="auto", choices=["auto", "model", "samples"],
                    help="the beams' attitude: model (damped-mode motion model), samples (the sensor's samples, runs no "
                         "model follows) or auto")
+    s.add_argument("--given", nargs="+", default=(), metavar="EFFECT",
+                   help="effects the run is known to carry (e.g. what its clean run named): fitted first and kept, "
+                        "the candidates judged on top of them")
     s.add_argument("--navigation", default="knots", choices=["random_walk", "knots"],
                    help="the base's vessel velocity: random_walk (a velocity at every ping, its random-walk intensity "
                         "from the data: a real boat's speed changes between fixes are motion) or knots (a smooth curve)")

@@ -70,6 +70,7 @@ def _summary(rows: list) -> dict:
         del s["clean_verdict"]  # one per file here: the false alarms below
         out[nav] = {**s, "false_alarms": int(sum(r["verdict"] != "none" for r in clean)), "clean_files": len(clean),
                     "clean_gaps": {r["file"]: r["gap"] for r in clean},
+                    "own_effects": {r["file"]: r.get("own_effects", []) for r in clean if r.get("own_effects")},
                     "max_seconds": max((r["seconds"] for r in mine), default=None)}
     return out
 
@@ -82,6 +83,9 @@ def print_diagnosis(res: dict) -> None:
         for e, v in s["per_error"].items():
             print(f"      {e:>22s}: top-1 {100 * v['top1']:.0f} %, smallest detected {v['smallest_detected']}")
         print("      clean gaps: " + ", ".join(f"{f} {g:.3f}" for f, g in s["clean_gaps"].items()))
+        for f, own in s.get("own_effects", {}).items():
+            print(f"      {f} names {', '.join(own)} on its clean run (counted above as an alarm; its injected runs are "
+                  "diagnosed on top of it)")
     for m in res["missing"]:
         print(f"  missing: {m}")
     best = max((s["top1"] or 0) for s in res["summary"].values()) if res["summary"] else 0

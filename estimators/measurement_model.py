@@ -47,7 +47,7 @@ from .attitude_fit import AttitudeFit, sampled_attitude
 from .formulations import AXES, lever_block
 from .row_jacobian import RowBlock, RowJacobian
 
-GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference", "motion")
+GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference", "motion", "vertical")
 NED = ("north", "east", "down")
 ATTITUDE_SOURCES = ("model", "samples", "frozen")
 MOVING_BEDS = ("off", "constant", "section")
@@ -224,8 +224,10 @@ class RunSetup:
     ``section_position``: position of each ping along the section in [0, 1] (section bed).
     ``navigation``: ``knots`` (the velocity piecewise-linear between the knots, nothing else) or
     ``random_walk`` (a velocity at every ping, :func:`ping_knots`, tied to its neighbours by a
-    random-walk prior: the ``motion`` rows (V_j+1 - V_j) / sqrt(dt_j), whose level sqrt(q) in
-    m/s/sqrt(s) is the process intensity; a real boat's ping-to-ping speed changes are motion).
+    random-walk prior: the ``motion`` rows (V_j+1 - V_j) / sqrt(dt_j) of the horizontal velocity, whose
+    level sqrt(q) in m/s/sqrt(s) is the process intensity, a real boat's ping-to-ping speed changes
+    being motion; the vertical velocity, a floating boat's heave, zero-mean: the ``vertical`` rows
+    V_j,down, whose level is its spread).
     """
 
     case: Case
@@ -254,6 +256,7 @@ class RunSetup:
         guess = initial_noise(self.case, self.fit, self.attitude_source == "model")
         if self.random_walk:
             guess["motion"] = random_walk_intensity(self.case)
+            guess["vertical"] = vertical_velocity_level(self.case)
         return guess
 
     def __post_init__(self):
@@ -335,6 +338,19 @@ def random_walk_intensity(case: Case) -> float:
     var_v = bt_noise_from_error_velocity(case) ** 2 * np.mean(np.diag(np.linalg.pinv(b.T @ b))[:2])
     q = spread2 - 2 * var_v / float(np.median(dt))
     return float(np.sqrt(max(q, 0.01 * spread2, 1e-8)))
+
+
+def vertical_velocity_level(case: Case) -> float:
+    """Starting level of the vertical-velocity prior in m/s: the robust (MAD) spread of the per-ping
+    static (ASC) vertical velocities about zero, less the beams' noise through the Janus geometry."""
+    w = asc(case).vessel_velocity_m_s[:, 2]
+    w = w[np.isfinite(w)]
+    if w.size < 10:
+        return 0.02
+    spread2 = (1.4826 * np.median(np.abs(w))) ** 2
+    b = case.instrument.beam_directions()
+    var_w = bt_noise_from_error_velocity(case) ** 2 * float(np.linalg.pinv(b.T @ b)[2, 2])
+    return float(np.sqrt(max(spread2 - var_w, 0.01 * spread2, 1e-8)))
 
 
 def navigation_slope(times: np.ndarray, knots: np.ndarray, V):
@@ -714,13 +730,15 @@ class SurveyModel:
                     models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
                     channels.append(Channel(k, f"reference_{NED[j]}", t_ref, (np.isfinite(v_meas[:, j]) & covered).astype(float)))
                 n_nodes += att_c.n_instructions() * L
-            if run.random_walk:  # the random-walk prior: increments over sqrt(dt)
+            if run.random_walk:  # the priors: horizontal increments over sqrt(dt), vertical levels
                 dt = np.diff(run.knots)
                 t_mid = 0.5 * (run.knots[1:] + run.knots[:-1])
-                dV = ca.times(V[1:, :] - V[:-1, :], ca.DM(np.repeat(1.0 / np.sqrt(dt)[:, None], 3, axis=1)))
-                for j in range(3):
+                dV = ca.times(V[1:, :2] - V[:-1, :2], ca.DM(np.repeat(1.0 / np.sqrt(dt)[:, None], 2, axis=1)))
+                for j in range(2):
                     models.append(dV[:, j])
                     channels.append(Channel(k, f"motion_{NED[j]}", t_mid, np.ones(dt.size)))
+                models.append(V[:, 2])  # a floating boat's vertical velocity: zero-mean heave, not a walk
+                channels.append(Channel(k, "vertical_down", run.knots, np.ones(run.knots.size)))
         if self.has_prior:  # N(0, prior^2) on B and C: a pseudo-run of its own, outside the runs' time bins
             models.append(self.heading[1:3])
             channels.append(Channel(len(self.runs), "prior_compass_deviation", np.zeros(2), np.ones(2)))

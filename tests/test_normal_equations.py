@@ -110,8 +110,9 @@ def test_variance_components_recover_a_random_walk_and_its_noise():
 
 
 def test_random_walk_rows_are_velocity_increments_over_root_dt():
-    """The base's motion rows are (V_j+1 - V_j) / sqrt(t_j+1 - t_j) of its per-ping velocities, the
-    walk's intensity estimated from the data beside the noise levels."""
+    """The base's motion rows are (V_j+1 - V_j) / sqrt(t_j+1 - t_j) of its per-ping horizontal
+    velocities, its vertical rows the per-ping vertical velocity itself (a floating boat heaves about
+    zero, it does not drift up or down), both levels estimated from the data beside the noise levels."""
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
     from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, fit_base
@@ -122,10 +123,14 @@ def test_random_walk_rows_are_velocity_increments_over_root_dt():
     knots = base.runs[0].knots
     np.testing.assert_array_equal(knots, case.pings.time_s)
     sl = model.channel_slices()
-    for axis, channel in zip("xyz", ("motion_north", "motion_east", "motion_down")):
+    for axis, channel in zip("xy", ("motion_north", "motion_east")):
         V = np.array([fit.x[model.names.index(f"V{j}_{axis}")] for j in range(knots.size)])
         np.testing.assert_allclose(fit.raw[sl[channel]], np.diff(V) / np.sqrt(np.diff(knots)), atol=1e-12)
-    assert 0 < sigma[(0, "motion")] < 1.0 and sigma[(0, "motion")] != base.sigma0[(0, "motion")]
+    assert "motion_down" not in sl
+    W = np.array([fit.x[model.names.index(f"V{j}_z")] for j in range(knots.size)])
+    np.testing.assert_allclose(fit.raw[sl["vertical_down"]], W, atol=1e-12)
+    for group in ("motion", "vertical"):
+        assert 0 < sigma[(0, group)] < 1.0 and sigma[(0, group)] != base.sigma0[(0, group)]
     with pytest.raises(ValueError, match="navigation: expected one of"):
         DiagnosisConfig(navigation="spline")
 
@@ -266,3 +271,30 @@ def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     assert [r["verdict"] for r in walk["rows"]] == ["none", "moving_bed"]
     assert "random-walk prior" in walk["rows"][1]["statement"] and "random-walk" not in res["rows"][1]["statement"]
     assert main(["diagnose", str(tmp_path / "x.h5"), "--field-selftest"]) == 2  # one line: expects --out
+
+
+def test_field_selftest_diagnoses_on_top_of_the_files_own_effects():
+    """A file that carries an effect of its own (here attitude samples stamped 0.5 s late) names it on
+    the clean run; every injected error is then diagnosed on top of it (given, not a candidate), and an
+    injected error of that same effect counts only when its estimate moves significantly its way."""
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig
+    from adcpdyn.estimators.diagnosis.field_errors import inject
+    from adcpdyn.estimators.diagnosis.field_selftest import _moved, field_selftest
+
+    sc = get_scenario("diag_boat")
+    case = inject(simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=40.0)), seed=3),
+                  "attitude_latency_s", 0.5)
+    res = field_selftest(case, None, DiagnosisConfig(effects=("moving_bed", "attitude_latency")),
+                         sizes={"moving_bed_m_s": [0.3]})
+    clean, bed = res["rows"]
+    assert clean["verdict"] == "attitude_latency" and res["own_effects"] == ["attitude_latency"]
+    assert bed["hit"] and bed["verdict"] == "moving_bed"
+    assert bed["statement"].startswith("on top of the run's own attitude_latency.delay_s = ")
+    own = {"params": {"attitude_latency.delay_s": 0.5}, "params_se": {"attitude_latency.delay_s": 0.01}}
+    assert _moved({"attitude_latency.delay_s": {"value": 0.8, "se": 0.01}}, own, "delay_s", 1.0)["hit"]
+    assert not _moved({"attitude_latency.delay_s": {"value": 0.2, "se": 0.01}}, own, "delay_s", 1.0)["hit"]  # the wrong way
+    assert not _moved({"attitude_latency.delay_s": {"value": 0.51, "se": 0.01}}, own, "delay_s", 1.0)["hit"]  # within noise
+    with pytest.raises(ValueError, match="unknown effect|expected one of"):
+        DiagnosisConfig(given=("no_such_effect",))

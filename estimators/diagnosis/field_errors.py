@@ -22,6 +22,10 @@ FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
     "tilt_lowpass_s": ("tilt_lowpass", "s", (0.5, 1.5)),
     "heave_m_s": ("heave", "m/s", (0.05, 0.15)),
 }
+SHIFTED_PARAMETER = {  # error -> (the effect's unknown it moves, the sign of that move for a positive size)
+    "compass_offset_deg": ("A_rad", 1.0), "attitude_latency_s": ("delay_s", 1.0), "reference_latency_s": ("delay_s", 1.0),
+    "sound_speed_relative": ("relative_error", -1.0), "tilt_lowpass_s": ("tau_s", 1.0),
+}
 HEAVE_OMEGA_RAD_S = 1.0  # the injected heave's frequency (a 6.3-s swell)
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 

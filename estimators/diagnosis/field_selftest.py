@@ -6,13 +6,14 @@ share named (top-1), the shrink found for the right effect, and the smallest siz
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
 from ...cases.case import Case
 from .diagnose import DiagnosisConfig, diagnose
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, has_moving_reference, inject
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, has_moving_reference, inject
 
 
 def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig = DiagnosisConfig(),
@@ -29,22 +30,47 @@ def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig
     moving = has_moving_reference(case)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
-    rows = []
+    rows, own, own_values = [], (), {}
     for error, size in trials:
         run = case if error == "clean" else inject(case, error, size)
         tic = time.perf_counter()
-        r = diagnose(run, config, calibration=calibration)
+        # the clean file's own effects are the file's: every injected error is diagnosed on top of them
+        r = diagnose(run, dataclasses.replace(config, given=own) if own else config, calibration=calibration)
         expected = "none" if error == "clean" else FIELD_ERRORS[error][0]
         mine = next((s for s in r.ranking if s["effect"] == expected and s["round"] == 1), None)
-        rows.append({"error": error, "size": size, "unit": FIELD_ERRORS[error][1] if error != "clean" else "",
-                     "expected": expected, "verdict": r.verdict, "hit": r.verdict.split("+")[0] == expected,
-                     "shrink": mine["shrink_fraction"] if mine else None, "estimate": mine["params"] if mine else None,
-                     "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
-                     "seconds": time.perf_counter() - tic, "statement": r.statement})
+        row = {"error": error, "size": size, "unit": FIELD_ERRORS[error][1] if error != "clean" else "",
+               "expected": expected, "verdict": r.verdict, "hit": r.verdict.split("+")[0] == expected,
+               "shrink": mine["shrink_fraction"] if mine else None, "estimate": mine["params"] if mine else None,
+               "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
+               "seconds": time.perf_counter() - tic, "statement": r.statement}
+        if error == "clean":
+            own = tuple(r.selected)
+            own_values = {name: next(s for s in r.ranking if s["effect"] == name and s["significant"]) for name in own}
+            row["own_effects"] = list(own)
+        elif expected in own:  # the file carries it already: named when its estimate moves significantly its way
+            row.update(_moved(r.given, own_values[expected], *SHIFTED_PARAMETER.get(error, (None, 0.0))))
+        rows.append(row)
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
     return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": config.navigation,
-            "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+            "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+
+
+def _moved(given: dict, clean: dict, parameter: str | None, sign: float) -> dict:
+    """An injected error of an effect the clean file carries: its unknowns' shift from the clean
+    file's estimates in combined standard errors; named when one moved beyond 3 of them, and the
+    error's own ``parameter`` (if it has one) moved the error's way (``sign``)."""
+    shifts, z, right_way = {}, 0.0, parameter is None
+    for name, v in given.items():
+        key = name.split("/")[-1]
+        if key in clean["params"]:
+            d = v["value"] - clean["params"][key]
+            se = float(np.hypot(v["se"], clean["params_se"].get(key, 0.0)))
+            shifts[key] = d
+            z = max(z, abs(d) / se if se > 0 else 0.0)
+            right_way = right_way or (key.endswith("." + parameter) and d * sign > 0)
+    return {"hit": bool(z > 3.0 and right_way), "estimate": {k: v["value"] for k, v in given.items()},
+            "se": {k: v["se"] for k, v in given.items()}, "shift_from_clean": shifts, "shift_z": z}
 
 
 def summarise(rows: list) -> dict:
@@ -71,6 +97,17 @@ def format_field_selftest(res: dict) -> str:
         lines.append(f"| {r['error']} | {r['size']:g} {r['unit']} | {r['verdict']} | {'yes' if r['hit'] else 'no'} | "
                      f"{shrink} | {r['gap']:.3f} ({r['gap_z']:.1f}) | {r['seconds']:.0f} |")
     s = res["summary"]
+    own = res.get("own_effects") or []
+    if own:
+        lines.append("")
+        lines.append(f"The clean file names {', '.join(own)} itself: the file's own, kept in every injected run's model, so "
+                     "the table's verdicts are what is found on top of it; an error of that same effect is named when its "
+                     "estimate moves beyond 3 standard errors the error's way:")
+        for r in res["rows"]:
+            if "shift_z" in r:
+                moved = ", ".join(f"{k} {v:+.3g}" for k, v in r["shift_from_clean"].items())
+                lines.append(f"- {r['error']} {r['size']:g} {r['unit']}: moved {moved} ({r['shift_z']:.1f} SE): "
+                             f"{'named' if r['hit'] else 'not named'}")
     lines.append("")
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
                  f"{100 * (s['top1'] or 0):.0f} %")

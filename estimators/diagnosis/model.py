@@ -27,7 +27,7 @@ from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import periodogram_peak
 from ..measurement_model import EffectTerm, ModelSpec, SurveyModel, channel_slices, hat_basis
 
-PRIOR_GROUPS = ("motion",)  # pseudo-observations of a prior (the random walk's increments), not data
+PRIOR_GROUPS = ("motion", "vertical")  # pseudo-observations of priors (the walk's increments, heave's levels), not data
 
 
 def group_of(channel: str) -> str:
