@@ -411,7 +411,7 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
 
 # ----------------------------------------------------------------------------------------------- correct
 def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep", reference: str = "bt",
-            out=None, history: str | None = None) -> "Correction":
+            out=None, history: str | None = None, accept_other_instrument: bool = False) -> "Correction":
     """Correct every ping of a case: vessel velocity (bottom track) and water profile.
 
     Parameters
@@ -430,6 +430,8 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         Write the result: HDF5 (``OUT.h5``, as ``adcpdyn correct``) or CF netCDF (``OUT.nc``).
     history : str, optional
         What produced it (the netCDF ``history`` attribute).
+    accept_other_instrument : bool
+        Apply a calibration whose CALIB.json names another instrument (refused by default).
 
     Returns
     -------
@@ -445,6 +447,7 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     """
     from .cases.hashing import sha256_of
     from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run, correct_case
 
     _choice("method", method, CORRECTION_METHODS)
@@ -457,6 +460,7 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     cal = calibration_dict(calibration)
     src, notes = _prepared(_source(case))
     c = as_calibrated_run(src.case, src.path or src.case.name, cal)
+    notes = notes + check_calibration_identity(cal, c, accept_other_instrument)
     result = correct_case(c, method, cal, timing, reference)
     if notes:
         result.attrs["warnings"] = notes
@@ -485,7 +489,7 @@ def _write_correction(src: _Source, result, out, calibration, history) -> None:
 
 
 # ----------------------------------------------------------------------------------------------- compare
-def compare(case, calibration=None, *, out=None, fmt: str = "png") -> Comparison:
+def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_instrument: bool = False) -> Comparison:
     """Every correction method on one case against its truth (simulated) or its GNSS reference.
 
     Parameters
@@ -497,6 +501,8 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png") -> Comparison
         A folder (created when its parent exists) for ``CASE_compare.json`` and the figure.
     fmt : {'png', 'pdf', 'svg'}
         The figure's format.
+    accept_other_instrument : bool
+        Apply a calibration whose CALIB.json names another instrument (refused by default).
 
     Returns
     -------
@@ -511,6 +517,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png") -> Comparison
 
     from .cases.coverage import reference_at
     from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run, correct_case
     from .estimators.metrics import velocity_metrics
 
@@ -522,6 +529,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png") -> Comparison
     cal = calibration_dict(calibration)
     src, notes = _prepared(_source(case))
     c = as_calibrated_run(src.case, src.path or src.case.name, cal)
+    notes = notes + check_calibration_identity(cal, c, accept_other_instrument)
     methods = [m for m in CORRECTION_METHODS if m != "oracle" or c.truth is not None]
     if cal is None:
         methods = [m for m in methods if m in ("asc", "oracle")]
@@ -558,7 +566,8 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png") -> Comparison
 
 # ----------------------------------------------------------------------------------------------- diagnose
 def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", navigation: str = "knots",
-             given=(), out=None, fmt: str = "png", progress: Callable[[str], None] | None = None) -> "DiagnosisResult":
+             given=(), out=None, fmt: str = "png", progress: Callable[[str], None] | None = None,
+             accept_other_instrument: bool = False) -> "DiagnosisResult":
     """Where the sim-to-real gap of a run lies, which unmodelled effect causes it, how far it shrinks.
 
     Parameters
@@ -586,6 +595,8 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         The figure's format.
     progress : callable, optional
         Called with each fitted model's label (``effect`` in round 1, ``chosen+effect`` later).
+    accept_other_instrument : bool
+        Apply a calibration whose CALIB.json names another instrument (refused by default).
 
     Returns
     -------
@@ -599,6 +610,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         Too few pings, no attitude, an unknown effect or option (one line).
     """
     from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
@@ -616,6 +628,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     sources = [dataclasses.replace(s, case=as_calibrated_run(s.case, s.path or s.case.name, cal)) for s, _ in prepared]
     sources = _keyed(sources)
     notes = [n for _, ns in prepared for n in ns]
+    notes += [n for s in sources for n in check_calibration_identity(cal, s.case, accept_other_instrument)]
     config = _diagnosis_config(effects, attitude, navigation, given)
     run_cases = [s.case for s in sources]
     result = _diagnose(run_cases if many else run_cases[0], config, calibration=cal, progress=progress)
@@ -638,7 +651,7 @@ def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "k
 
 def field_selftest(case, calibration=None, *, navigation: str = "knots", effects=None, attitude: str = "auto",
                    sizes: dict | None = None, out=None, fmt: str = "png",
-                   progress: Callable[[str], None] | None = None) -> dict:
+                   progress: Callable[[str], None] | None = None, accept_other_instrument: bool = False) -> dict:
     """What this file can detect: each field error (compass offset, attitude and reference
     latency, moving bed, sound speed) injected at typical sizes into the file's recorded channels,
     and each run diagnosed blind with the file's calibration.
@@ -648,7 +661,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
     case : path, Case or ImportedCase
     calibration : path, CalibrationResult, CalibrationRecord or dict, optional
         The file's calibration; without one the file is calibrated on itself first (8 starts).
-    navigation, effects, attitude : as :func:`diagnose`.
+    navigation, effects, attitude, accept_other_instrument : as :func:`diagnose`.
     sizes : dict, optional
         {error: sizes} (``adcpdyn.estimators.diagnosis.field_errors.FIELD_ERRORS`` names and
         units); default the field's typical sizes.
@@ -662,6 +675,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
     from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
@@ -677,6 +691,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         note = "calibrated on itself (8 starts): no --calibration given"
     cal = calibration_dict(calibration)
     run = as_calibrated_run(src.case, src.path or src.case.name, cal)
+    notes = notes + check_calibration_identity(cal, run, accept_other_instrument)
     config = _diagnosis_config(effects, attitude, navigation)
     res = _field_selftest(run, cal, config, sizes=sizes, progress=progress)
     res["notes"] = notes + ([note] if note else [])

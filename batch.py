@@ -40,6 +40,7 @@ class CorrectJob:
     calibration_path: str | None = None
     timing: str = "deep"
     reference: str = "bt"  # water velocities referenced to the bottom track or the GNSS
+    accept_other_instrument: bool = False  # apply a calibration that names another instrument
 
 
 def _calibrate(job: CalibrateJob) -> dict:
@@ -61,7 +62,8 @@ def _correct(job: CorrectJob) -> dict:
     from .api import correct
     from .cases.corrected import write_correction
 
-    result = correct(job.case_path, job.method, job.calibration_path, timing=job.timing, reference=job.reference)
+    result = correct(job.case_path, job.method, job.calibration_path, timing=job.timing, reference=job.reference,
+                     accept_other_instrument=job.accept_other_instrument)
     write_correction(result, job.out_path, source_case=job.case_path)  # the folder is made by the first write
     notes = result.attrs.get("warnings", [])
     v = result.vessel_velocity_m_s

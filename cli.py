@@ -274,7 +274,7 @@ def cmd_correct(args) -> int:
         _load_calibration(args.calibration)  # a bad file is one error here, not one per case
         calib = str(Path(args.calibration).resolve()) if args.calibration else None
         jobs = [CorrectJob(str(p), str((out / f"{p.stem}_{args.method}.h5").resolve()), args.method, calib, args.timing,
-                           args.reference) for p in paths]
+                           args.reference, args.accept_other_instrument) for p in paths]
         return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
@@ -282,7 +282,7 @@ def cmd_correct(args) -> int:
     command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
                + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
     result = correct(args.case, args.method, args.calibration, timing=args.timing, reference=args.reference,
-                     out=args.out, history=command)
+                     out=args.out, history=command, accept_other_instrument=args.accept_other_instrument)
     for w in result.attrs.get("warnings", []):
         print(f"warning: {w}")
     v = result.vessel_velocity_m_s
@@ -324,7 +324,8 @@ def cmd_compare(args) -> int:
 
     if args.out:
         check_output_folder(args.out)
-    comparison = compare(args.case, args.calibration, out=args.out, fmt=args.format)
+    comparison = compare(args.case, args.calibration, out=args.out, fmt=args.format,
+                         accept_other_instrument=args.accept_other_instrument)
     for w in comparison.warnings:
         print(f"warning: {w}")
     print(f"{comparison.case}: vessel velocity against {comparison.against_text}")
@@ -355,6 +356,8 @@ def _print_calibration(result, title: str) -> None:
           f"{result.jacobian} Jacobian, beams' attitude from the {result.attitude_source}")
     print(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
           f"{result.max_constraint_violation:.2e}; {ms.time_s:.2f} s")
+    if result.instrument is not None:
+        print(f"instrument: {result.instrument.label()}")
     label = "head-frame lever arms (m)" if result.attitude_frame == "transducer" else "radius vectors, body frame (m)"
     print(label + "  [value +- se]")
     for i in range(4):
@@ -383,6 +386,11 @@ def _print_calibration(result, title: str) -> None:
         if len(result.runs) > 1:
             for run in result.runs:
                 print(f"  {run.case}: {fmt(run.moving_bed_velocity_m_s, run.moving_bed_velocity_se_m_s)}")
+    test = result.moving_bed_test
+    if test:
+        share = "" if test["percent_of_flow"] is None else f", {test['percent_of_flow']:.1f} % of the mean flow"
+        print(f"moving-bed test: {test['decision']} ({test['reason']}{share}; threshold {test['threshold_m_s']:.3f} m/s)"
+              + ("; solved again without a bed" if test["decision"] == "fixed" else ""))
     inflation = result.standard_errors.get("inflation_over_white", {})
     if inflation:
         worst = max(inflation, key=inflation.get)
@@ -533,7 +541,8 @@ def cmd_diagnose(args) -> int:
     check_output_file(args.out, *paths, args.calibration)
     progress = _DiagnosisProgress("diagnose", len(paths))
     result = diagnose(paths if args.joint else paths[0], args.calibration, effects=args.effects, attitude=args.attitude,
-                      navigation=args.navigation, given=args.given, progress=progress.fitted_model)
+                      navigation=args.navigation, given=args.given, progress=progress.fitted_model,
+                      accept_other_instrument=args.accept_other_instrument)
     progress(f"done: verdict {result.verdict}")
     for w in result.base.get("case_warnings", []):
         print(f"warning: {w}")
@@ -552,6 +561,7 @@ def _diagnose_field_selftest(args) -> int:
         raise ValueError("diagnose: --field-selftest expects one CASE.h5 and --out SELFTEST.json (no --joint)")
     check_output_file(args.out, args.case[0], args.calibration)
     res = field_selftest(args.case[0], args.calibration, navigation=args.navigation, effects=args.effects,
+                         accept_other_instrument=args.accept_other_instrument,
                          attitude=args.attitude, out=args.out, fmt=args.format,
                          progress=lambda text: print(text, file=sys.stderr, flush=True))
     for n in res["notes"]:
@@ -704,6 +714,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="travel-time model of the dynamic methods: deep (Eqs. 66-70), shallow, or exact (rootfinder, "
                         "oracle: travel time with the moving transducer)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
+    s.add_argument("--accept-other-instrument", action="store_true",
+                   help="apply a calibration whose CALIB.json names another instrument (refused by default)")
     s.add_argument("--reference", default="bt", choices=REFERENCES,
                    help="water velocities referenced to the bottom track (bt) or to the GNSS velocity (gnss)")
     s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
@@ -716,6 +728,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = command("compare", "every correction method on one case: metrics table and figures", cmd_compare)
     s.add_argument("case", help="CASE.h5 (with /truth, or a GNSS reference)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (without one: asc and oracle only)")
+    s.add_argument("--accept-other-instrument", action="store_true",
+                   help="apply a calibration whose CALIB.json names another instrument (refused by default)")
     s.add_argument("--out", help="folder for the table (JSON) and figure")
     figure_format(s)
 
@@ -771,6 +785,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="several runs of one boat together: shared effects (compass, beams, sound speed, latency, lever "
                         "arms) and per-run ones (moving bed, heave, forced roll); whole runs held out too")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (its platform quantities pinned in the base)")
+    s.add_argument("--accept-other-instrument", action="store_true",
+                   help="apply a calibration whose CALIB.json names another instrument (refused by default)")
     s.add_argument("--out", help="DIAG.json (DIAG.md and a figure are written beside it)")
     s.add_argument("--effects", nargs="+", metavar="EFFECT", help="catalog effects to try (default: all)")
     s.add_argument("--attitude", default="auto", choices=["auto", "model", "samples"],

@@ -31,6 +31,9 @@ class Instrument:
     layout: str = "janus4"
     beam_dirs_t: np.ndarray | None = None  # (4, 3) override of the Janus beam vectors
     beam_pos_t: np.ndarray | None = None  # (4, 3) override of the transducer positions
+    make: str = ""  # who built it ("TRDI", "Nortek"; a simulator names itself); "" when not known
+    model: str = ""  # the maker's model name
+    serial_number: str = ""
 
     def beam_directions(self) -> np.ndarray:
         """Outward unit beam vectors in the transducer frame, (4, 3)."""

@@ -653,6 +653,17 @@ class _Reader:
         return s
 
 
+def _identity_text(v) -> str:
+    """An identity attribute (make, model, serial number) as text, a numeric serial included; "" when absent."""
+    if v is None:
+        return ""
+    text = _text(v)
+    if text is None:
+        v = np.asarray(v).ravel()
+        text = str(v[0].item()) if v.size == 1 else ""
+    return text.strip()
+
+
 def _text(v) -> str | None:
     """A str from a str/bytes attribute value (possibly a 1-element array), else None."""
     if isinstance(v, np.ndarray) and v.size == 1:
@@ -699,6 +710,7 @@ def _read(f: h5py.File, rd: _Reader) -> Case:
         layout=rd.str_attr(g, "layout"),
         beam_dirs_t=rd.dataset(g, "beam_dirs_t", required=False),
         beam_pos_t=rd.dataset(g, "beam_pos_t", required=False),
+        **{k: _identity_text(rd._raw_attr(g, k, False)) for k in ("make", "model", "serial_number")},
     )
 
     g = rd.group(root, "environment")
@@ -858,6 +870,9 @@ def _write(f: h5py.File, case: Case) -> None:
     g.attrs["sound_speed_m_s"] = np.float64(ins.sound_speed_m_s)
     g.attrs["n_beams"] = np.int64(ins.n_beams)
     g.attrs["layout"] = str(ins.layout)
+    for key in ("make", "model", "serial_number"):  # the instrument's identity (attributes the format lets producers add)
+        if getattr(ins, key):
+            g.attrs[key] = str(getattr(ins, key))
     _ds(g, "beam_dirs_t", ins.beam_dirs_t)
     _ds(g, "beam_pos_t", ins.beam_pos_t)
 

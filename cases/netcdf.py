@@ -154,8 +154,17 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     data["sea_floor_depth"] = (("time",), case.environment.depth_at_pings(N), {
         "standard_name": "sea_floor_depth_below_sea_surface", "units": "m", "positive": "down",
         "long_name": "depth of the bed below the surface under each ping (bottom track)"})
-    data["transducer_depth"] = ((), float(case.environment.transducer_depth_m), {
-        "long_name": "depth of the transducer face below the surface when level", "units": "m", "positive": "down"})
+    calibrated = None if correction is None else correction.attrs.get("transducer_depth_calibrated_m")
+    if calibrated is None:
+        data["transducer_depth"] = ((), float(case.environment.transducer_depth_m), {
+            "long_name": "depth of the transducer face below the surface when level", "units": "m", "positive": "down"})
+    else:  # what the velocities were computed with, and what the instrument was told
+        data["transducer_depth"] = ((), float(calibrated), {
+            "long_name": "depth of the transducer face below the surface when level, as calibrated from the slant "
+                         "ranges (used by the correction)", "units": "m", "positive": "down"})
+        data["transducer_depth_entered"] = ((), float(case.environment.transducer_depth_m), {
+            "long_name": "depth of the transducer face below the surface as entered in the instrument or case",
+            "units": "m", "positive": "down"})
     if case.water is not None:
         coords["depth"] = ("depth", np.asarray(case.water.cell_depth_m, dtype=np.float64), {
             "standard_name": "depth", "long_name": "depth of the cell centre below the surface", "units": "m",

@@ -157,6 +157,7 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
             transducer_radius_m=float(pf.instrument.transducer_radius_m),
             frequency_hz=float(pf.instrument.frequency_hz),
             sound_speed_m_s=float(c_inst),
+            make="adcpdyn simulator", model=f"{pf.name} ADCP", serial_number=pf.name,
         ),
         environment=Environment(water_depth_m=float(run.water_depth_m), transducer_depth_m=float(run.transducer_depth_m)),
         vessel=pf.vessel,

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from ..cases.case import Case
+from ..cases.identity import identity_of, instrument_difference, site_differences, site_of
 from ..models.motion import AttitudeParams, evaluate_attitude
 from ..models.rotations import euler_matrix
 from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
@@ -38,6 +39,7 @@ from .attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from .calibration_result import CalibrationResult, RunResult, jsonable
 from .formulations import FORMULATIONS
 from .hac import sandwich
+from .moving_bed_test import mean_flow_speed, moving_bed_test
 from .measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
                                 heading_span, knot_times)
 from .uncertainty import uncertainty
@@ -52,6 +54,7 @@ MAX_MODEL_RESIDUAL_RAD = tuple(float(np.deg2rad(d)) for d in (2.0, 1.0, 1.0))
 MIN_RESIDUAL_LAG1 = 0.5  # |lag-1 autocorrelation| above which a residual is motion left unfollowed, not sensor noise
 METHODS = ("joint", "two-stage")
 TANGENTIALS = ("consistent", "paper_literal")
+DECLINATION_SPAN_RAD = np.radians(1.0)  # runs' declinations farther apart than a survey's site spreads them
 DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
 JACOBIANS = ("auto", "symbolic", "assembled")
 ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is assembled per row
@@ -116,7 +119,9 @@ class CalibrationConfig:
         (at least ``MIN_SAMPLES_PER_PERIOD`` per period of the pre-fit's dominant mode).
     moving_bed : str
         The bed moving under the bottom track (bed load; the reference does not see it):
-        ``auto`` (``constant`` with a moving reference, else ``off``), ``off`` (a bed verified
+        ``auto`` (with a moving reference a constant bed, kept only when the data say it moves:
+        :func:`~adcpdyn.estimators.moving_bed_test.moving_bed_test`, reported in
+        ``moving_bed_test``; else ``off``), ``off`` (a bed verified
         fixed, e.g. by a loop or stationary test), ``constant`` (one velocity, north and east,
         shared by the runs) or ``section`` (a piecewise-linear function of the position along
         the section, ``moving_bed_section_knots`` values shared by the runs).
@@ -264,6 +269,7 @@ class CalibrationProblem:
                 raise ValueError(f"{case.name}: /pings/time_s: expected at least {MIN_PINGS} pings to calibrate, got {case.pings.n}")
         if len(set(names)) != len(names):
             raise ValueError(f"cases: expected distinct case names (results are keyed by them), got {names}")
+        self.identity, self.identity_warnings = _one_instrument(self.cases)
         self.config = config
         self.two_stage = config.method == "two-stage"
         fits = list(fit) if isinstance(fit, (list, tuple)) else [fit] * len(self.cases)
@@ -412,6 +418,24 @@ class CalibrationProblem:
 
     # ------------------------------------------------------------------ solve
     def solve(self) -> CalibrationResult:
+        """Solve; with ``moving_bed="auto"`` the fitted bed is tested (:mod:`.moving_bed_test`) and,
+        unless the data say it moves, dropped and the problem solved again without it."""
+        result = self._solve()
+        if not (self.config.moving_bed == "auto" and self.moving_bed == "constant"):
+            return result
+        confounded = any("moving_bed_velocity" in c.get("pair", []) for c in result.confounded)
+        test = moving_bed_test(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s, confounded,
+                               mean_flow_speed(self.cases))
+        if test["decision"] != "moving":  # freed only when the data say it moves (QRev: a test decides)
+            result = CalibrationProblem(self.cases, dataclasses.replace(self.config, moving_bed="off"), fit=self.fits).solve()
+            if test["decision"] == "undetermined":
+                result.warnings.append(f"moving bed not tested by these runs ({test['reason']}): solved without one; a "
+                                       "bed that does move is then carried by the heading: run a loop or stationary test, "
+                                       "or calibrate transects on several courses together")
+        result.moving_bed_test = test
+        return result
+
+    def _solve(self) -> CalibrationResult:
         cfg = self.config
         x0s = self.start_points(cfg.n_starts, cfg.seed)
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
@@ -534,6 +558,7 @@ class CalibrationProblem:
                          f"{self.heading_span:.3f}, 0.5 = all round); what the headings leave open enters the bed's and "
                          "the misalignment's standard errors")}
         declination, declination_note = self._declination()
+        warn += self.identity_warnings
         self._se_x = se_x
         runs = self._run_results(x, e, bed)
         first = runs[0]
@@ -559,6 +584,7 @@ class CalibrationProblem:
             compass_deviation_centre=model.heading_centre,
             magnetic_declination_rad=declination, magnetic_declination_note=declination_note,
             standard_errors=se_info, confounded=confounded, runs=runs, **bed["top"],
+            instrument=self.identity, site=site_of(self.cases),
         )
 
     def _shared_covariance(self, J, e, unc, Q) -> tuple[np.ndarray, dict]:
@@ -662,6 +688,11 @@ class CalibrationProblem:
         if not values:
             return None, found[0][1] + "; give --declination-deg to compare the misalignment with it"
         mean = float(np.angle(np.mean(np.exp(1j * np.array(values)))))
+        spread = float(np.ptp(np.unwrap(values)))
+        if spread > DECLINATION_SPAN_RAD:
+            self.identity_warnings.append(
+                f"the runs' magnetic declinations span {np.rad2deg(spread):.1f} deg (more than a survey's "
+                f"{np.rad2deg(DECLINATION_SPAN_RAD):g} deg): runs of different sites or years calibrated as one")
         note = found[0][1] if len(values) == 1 else (f"IGRF-14 over {len(values)} runs: {np.rad2deg(mean):+.2f} deg "
                                                      f"(runs {np.rad2deg(min(values)):+.2f} to {np.rad2deg(max(values)):+.2f})")
         return mean, note
@@ -735,3 +766,23 @@ def calibrate_runs(cases, config: CalibrationConfig | None = None) -> Calibratio
     installation angles or heading misalignment (and compass deviation), one moving bed;
     per run its attitude and navigation. ``result.runs`` holds each run's own numbers."""
     return CalibrationProblem(list(cases), config or CalibrationConfig()).solve()
+
+
+def _one_instrument(cases) -> tuple:
+    """The runs' instrument identity, refusing runs of different instruments in one line; and
+    warnings when the runs lie farther apart than a survey reaches (sites, dates)."""
+    ids = [identity_of(c) for c in cases]
+    for case, other in zip(cases[1:], ids[1:]):
+        why = instrument_difference(ids[0], other)
+        if why:
+            raise ValueError(f"cases: {cases[0].name} ({ids[0].label()}) and {case.name} ({other.label()}) are two "
+                             f"instruments ({why}): a joint calibration is of one instrument on one installation")
+    warnings = []
+    first = site_of(cases[:1])
+    for case in cases[1:]:
+        far = site_differences(first, site_of([case]))
+        if far:
+            warnings.append(f"runs {cases[0].name} and {case.name} lie {' and '.join(far)}: one installation and "
+                            "compass over both is assumed")
+    return ids[0], warnings
+

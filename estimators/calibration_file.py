@@ -29,7 +29,7 @@ __all__ = ["KEYS", "SCHEMA_VERSIONS", "Calibration", "read_calibration", "valida
            "installation_angles", "nominal_installation", "heading_misalignment", "moving_bed_velocity",
            "attitude_model_from", "calibration_source"]
 
-SCHEMA_VERSIONS = (1, 2)
+SCHEMA_VERSIONS = (1, 2, 3)
 MAX_LEVER_ARM_M = 100.0  # a transducer 100 m from the centre of rotation: no vessel carries one
 MAX_MOVING_BED_M_S = 5.0
 MAX_COMPASS_DEVIATION_RAD = 0.5
@@ -155,6 +155,23 @@ def _runs(value, path, fail):
                 _check(KEYS[k], run[k], f"{p}.{k}", fail)
 
 
+def _members(spec: dict):
+    def check(value, path, fail):
+        for k, key in spec.items():
+            if k in value:
+                _check(key, value[k], f"{path}.{k}", fail)
+    return check
+
+
+_instrument = _members({"make": Key("string"), "model": Key("string"), "serial_number": Key("string"),
+                        "frequency_hz": Key("number", nulls=NONE, low=1e3, high=1e8, unit="Hz"),
+                        "beam_angle_deg": Key("number", nulls=NONE, low=5.0, high=60.0, unit="deg"),
+                        "n_beams": Key("integer", nulls=NONE), "sensor_frame": Key("string")})
+_site = _members({"latitude_deg": Key("number", low=-90.0, high=90.0, unit="deg"),
+                  "longitude_deg": Key("number", low=-180.0, high=180.0, unit="deg"),
+                  "start_utc": Key("string"), "end_utc": Key("string")})
+
+
 # One line per key: what `adcpdyn calibrate` writes and what readers use.
 KEYS: dict[str, Key] = {
     "schema_version": Key("integer", nulls=NONE, choices=SCHEMA_VERSIONS),
@@ -204,6 +221,10 @@ KEYS: dict[str, Key] = {
     "confounded": Key("list"),
     "runs": Key("list", check=_runs),
     "provenance": Key("object"),  # adcpdyn version, source cases and their SHA-256, time written
+    # schema version 3: whose calibration it is (cases.identity)
+    "instrument": Key("object", check=_instrument),  # make, model, serial, frequency, beam angle, beams, sensor frame
+    "site": Key("object", check=_site),  # the runs' mean position and UTC span
+    "moving_bed_test": Key("object"),  # --moving-bed auto: speed, SE, threshold, percent of flow, decision
 }
 
 # A file holding none of these is not a calibration.
@@ -491,7 +512,8 @@ def moving_bed_velocity(calibration, case_name: str) -> tuple[np.ndarray | None,
     bed = vector(calibration.get("moving_bed_velocity_m_s"))
     if bed is None:
         return None, ""
-    return bed, "the calibration's site bed (this case is not one of its runs)"
+    why = "this case is not one of its runs" if own is None else "this run's own is not determined"
+    return bed, f"the calibration's site bed ({why})"
 
 
 def heading_misalignment(calibration) -> float | None:

@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration_file import Calibration, as_calibration, read_calibration
+from ..cases.identity import InstrumentIdentity, Site
+from .calibration_file import Calibration, as_calibration, moving_bed_velocity, read_calibration
 
 __all__ = ["CalibrationRecord", "RunRecord", "calibration_dict"]
 
@@ -88,7 +89,7 @@ class CalibrationRecord:
     Attributes
     ----------
     schema_version : int
-        1 (no ``schema_version`` key) or 2.
+        1 (no ``schema_version`` key), 2 or 3.
     attitude_frame : str
         ``vessel`` (sensor in the vessel frame) or ``transducer`` (sensor in the head).
     lever_arms_m, lever_arms_se_m : ndarray (4, 3)
@@ -124,6 +125,10 @@ class CalibrationRecord:
     warnings : tuple of str
     provenance : dict
         adcpdyn version, source cases and their SHA-256, time written (empty for older files).
+    instrument : InstrumentIdentity or None
+        Whose calibration it is (schema 3; None for older files).
+    site : Site or None
+        The runs' mean position and UTC span (schema 3).
     source : str
         The file it was read from ('' when built from a dict in memory).
     data : Calibration
@@ -163,6 +168,8 @@ class CalibrationRecord:
     provenance: dict
     source: str
     data: Calibration = field(repr=False)
+    instrument: InstrumentIdentity | None = None
+    site: Site | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -232,6 +239,8 @@ class CalibrationRecord:
             runs=runs, warnings=tuple(str(w) for w in c.get("warnings") or []),
             provenance=dict(c.get("provenance") or {}) if isinstance(c.get("provenance"), dict) else {},
             source=c.source, data=c,
+            instrument=InstrumentIdentity.from_dict(c["instrument"]) if c.get("instrument") else None,
+            site=Site.from_dict(c["site"]) if c.get("site") else None,
         )
 
     # ------------------------------------------------------------------ views
@@ -240,11 +249,9 @@ class CalibrationRecord:
         return next((r for r in self.runs if r.case == case_name), None)
 
     def moving_bed_for(self, case_name: str) -> np.ndarray | None:
-        """The bed velocity (north, east) that applies to a case: its run's own, else the site's, else None."""
-        run = self.run_for(case_name)
-        if run is not None and run.moving_bed_velocity_m_s is not None:
-            return run.moving_bed_velocity_m_s
-        return self.moving_bed_velocity_m_s
+        """The bed velocity (north, east) that applies to a case: its run's own, else the site's, else
+        None (:func:`~adcpdyn.estimators.calibration_file.moving_bed_velocity`, the one lookup)."""
+        return moving_bed_velocity(self.data, case_name)[0]
 
     def to_dict(self) -> Calibration:
         """The validated dict the estimators read (the parsed file)."""

@@ -1,5 +1,5 @@
 """What a calibration returns: estimates with standard errors, the solver's own account, what
-is not determined and why, per run; and its CALIB.json form (schema version 2).
+is not determined and why, per run; and its CALIB.json form (schema version 3).
 
 Version 2 adds to version 1 (whose keys it keeps): ``schema_version``,
 ``moving_bed_velocity_m_s`` / ``_se_m_s`` (north, east; null when not estimated or not
@@ -7,7 +7,9 @@ determined), ``moving_bed`` (model, section knots), ``compass_deviation_rad`` / 
 ({"sin": B, "cos": C}), ``magnetic_declination_rad``, ``compass_error_rad`` (misalignment
 minus declination), ``standard_errors`` (method, lags, per-quantity inflation over white
 noise, residual lag-1 autocorrelation per run and channel), ``confounded`` (pairs the data
-cannot separate, in words) and ``runs`` (one entry per case).
+cannot separate, in words) and ``runs`` (one entry per case). Version 3 adds whose it is:
+``instrument`` (make, model, serial number, frequency, beam angle, beams, sensor frame) and
+``site`` (the runs' mean position and UTC span), null where the runs do not say.
 """
 
 from __future__ import annotations
@@ -17,11 +19,12 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..cases.identity import InstrumentIdentity, Site
 from ..models.motion import AttitudeParams
 from ..solvers.multistart import MultistartResult
 from .uncertainty import Uncertainty
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 
 def jsonable(obj):
@@ -147,6 +150,9 @@ class CalibrationResult:
     runs: list = field(default_factory=list)
     # where it came from, for CALIB.json's ``provenance``: {"cases": [{"name", "path", "sha256"}, ...], ...}
     provenance: dict = field(default_factory=dict)
+    instrument: InstrumentIdentity | None = None  # whose calibration it is (schema 3)
+    site: Site | None = None  # the runs' mean position and UTC span
+    moving_bed_test: dict | None = None  # --moving-bed auto: the bed's speed, SE, threshold and the decision
 
     @property
     def success(self) -> bool:
@@ -219,6 +225,9 @@ class CalibrationResult:
             "config": {k: v for k, v in asdict(self.config).items() if k != "solver"},
             "runs": [r.to_dict() for r in self.runs],
             "provenance": provenance_block(self),
+            "instrument": None if self.instrument is None else self.instrument.to_dict(),
+            "site": None if self.site is None else self.site.to_dict(),
+            "moving_bed_test": self.moving_bed_test,
         }
         if self.moving_bed == "section":
             out["moving_bed"].update({"section_positions": np.linspace(0, 1, len(self.moving_bed_knots_m_s)).tolist(),

@@ -27,18 +27,11 @@ def assumed_installation(calibration: dict) -> np.ndarray:
 
 def moving_bed_for(calibration: dict | None, case: Case) -> tuple[np.ndarray | None, str]:
     """The bed velocity (north, east) a calibration found under this case's pings, and where it
-    came from: the case's own entry in ``runs``, else the survey's bed (a case not among the
-    calibrated runs, same site), else none (no bed estimated or not determined)."""
-    if calibration is None:
-        return None, ""
-    runs = calibration.get("runs") or []
-    own = next((r for r in runs if r.get("case") == case.name), None)
-    if own is not None and own.get("moving_bed_velocity_m_s") is not None:
-        return np.asarray(own["moving_bed_velocity_m_s"], dtype=float), f"run {case.name!r} of the calibration"
-    bed = calibration.get("moving_bed_velocity_m_s")
-    if bed is None or any(v is None for v in bed):
-        return None, ""
-    return np.asarray(bed, dtype=float), "the calibration's site bed (this case is not one of its runs)"
+    came from (:func:`~adcpdyn.estimators.calibration_file.moving_bed_velocity`, the one lookup:
+    the case's own run when both components are determined, else the site's bed, else none)."""
+    from .calibration_file import moving_bed_velocity
+
+    return moving_bed_velocity(calibration, case.name)
 
 
 def with_calibrated_depth(case: Case, calibration: dict | None) -> tuple[Case, str]:
@@ -105,6 +98,7 @@ def correct_case(case: Case, method: str, calibration=None, timing: str = "deep"
     result.attrs.update(heading_corrections_applied(case, calibration if method != "oracle" else None))
     if depth_note:
         result.attrs["transducer_depth_note"] = depth_note
+        result.attrs["transducer_depth_calibrated_m"] = float(case.environment.transducer_depth_m)
     bed, source = moving_bed_for(calibration, case) if method != "oracle" else _true_bed(case)
     if bed is None:
         result.attrs["moving_bed_velocity_m_s"] = None  # recorded: none applied

@@ -122,14 +122,20 @@ def test_vessel_frame_installation_yaw_against_reference(lake_case):
 
 
 def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_case):
-    """With the bed a parameter (the default with a moving reference), one straight run cannot tell a
-    bed moving under the bottom track from a yaw error: the report names the pair in words, the yaw's
-    standard error grows to cover it (several times the fixed-bed one), and the estimates stay
-    within their standard errors of the truth (a still bed, the true yaw)."""
+    """With the bed a parameter (``constant``), one straight run cannot tell a bed moving under the
+    bottom track from a yaw error: the report names the pair in words, the yaw's standard error
+    grows to cover it (several times the fixed-bed one), and the estimates stay within their
+    standard errors of the truth (a still bed, the true yaw). The default (``auto``) tests the bed:
+    undetermined here, so it is dropped, the fixed-bed numbers come back and a warning says why."""
     case = lake_case
     fixed = _quiet_calibrate(case, formulation="minimal", n_starts=3, timing="shallow", moving_bed="off")
-    free = _quiet_calibrate(case, formulation="minimal", n_starts=3, timing="shallow")
-    assert free.moving_bed == "constant"
+    free = _quiet_calibrate(case, formulation="minimal", n_starts=3, timing="shallow", moving_bed="constant")
+    auto = _quiet_calibrate(case, formulation="minimal", n_starts=3, timing="shallow")
+    assert auto.moving_bed == "off" and auto.moving_bed_test["decision"] == "undetermined"
+    assert auto.moving_bed_test["speed_m_s"] == pytest.approx(float(np.hypot(*free.moving_bed_velocity_m_s)), rel=1e-6)
+    assert "moving bed not tested by these runs" in " ".join(auto.warnings)
+    assert auto.installation_ypr_se_rad[0] == pytest.approx(fixed.installation_ypr_se_rad[0], rel=1e-6)
+    assert free.moving_bed == "constant" and free.moving_bed_test is None
     assert [c["pair"] for c in free.confounded] == [["installation_yaw", "moving_bed_velocity"]]
     assert "moving bed vs installation yaw" in " ".join(free.warnings)
     assert free.installation_ypr_se_rad[0] > 3 * fixed.installation_ypr_se_rad[0]

@@ -29,9 +29,11 @@ def _write(tmp_path, d, name="c.json"):
     return path
 
 
-def test_what_calibrate_writes_is_valid_and_schema_version_2_with_new_keys_too(written, tmp_path):
+def test_what_calibrate_writes_is_valid_and_schema_version_3_with_new_keys_too(written, tmp_path):
     d, _ = written
-    assert d["schema_version"] == 2  # what calibrate writes
+    assert d["schema_version"] == 3  # what calibrate writes: whose it is too
+    assert d["instrument"]["make"] == "adcpdyn simulator" and d["instrument"]["frequency_hz"] > 0
+    assert set(d["site"]) == {"latitude_deg", "longitude_deg", "start_utc", "end_utc"}
     assert read_calibration(_write(tmp_path, d)) == d
     v1 = {k: v for k, v in d.items() if k != "schema_version"}  # files of earlier versions carry no version: 1
     assert read_calibration(_write(tmp_path, v1, "v1.json")) == v1
@@ -78,7 +80,9 @@ BAD = {  # variant: (edit, the key the one-line error must name)
     "attitude model a list": (_set(["attitude_model"], [1, 2]), "attitude_model"),
     "nominal installation a string": (_set(["config", "nominal_installation_ypr_rad"], "zero"),
                                       "config.nominal_installation_ypr_rad"),
-    "schema version 3": (_set(["schema_version"], 3), "schema_version"),
+    "schema version 4": (_set(["schema_version"], 4), "schema_version"),
+    "instrument frequency a string": (_set(["instrument", "frequency_hz"], "1200 kHz"), "instrument.frequency_hz"),
+    "site latitude 95": (_set(["site", "latitude_deg"], 95.0), "site.latitude_deg"),
     "schema version null": (_set(["schema_version"], None), "schema_version"),
     "moving bed 6 m/s": (_set(["moving_bed_velocity_m_s"], [6.0, 0.0]), "moving_bed_velocity_m_s[0]"),
     "moving bed |v| > 5": (_set(["moving_bed_velocity_m_s"], [4.0, 4.0]), "moving_bed_velocity_m_s"),

@@ -44,7 +44,7 @@ def test_from_json_round_trip(calibrated):
     result, path, _ = calibrated
     rec = CalibrationResult.from_json(path)
     assert isinstance(rec, CalibrationRecord) and rec.source == str(path)
-    assert rec.schema_version == 2 and rec.attitude_frame == result.attitude_frame == "transducer"
+    assert rec.schema_version == 3 and rec.attitude_frame == result.attitude_frame == "transducer"
     determined = np.isfinite(result.lever_arms_sensor_se_m)
     assert determined.any()
     np.testing.assert_array_equal(rec.lever_arms_m[determined], result.lever_arms_sensor_m[determined])
@@ -56,7 +56,7 @@ def test_from_json_round_trip(calibrated):
     assert [r.case for r in rec.runs] == [r.case for r in result.runs] == ["pool_m0"]
     assert rec.runs[0].attitude_model is not None
     assert rec.heading_misalignment_rad is None  # a run at rest: no course to turn onto
-    assert rec.to_dict() is rec.data and rec.data["schema_version"] == 2
+    assert rec.to_dict() is rec.data and rec.data["schema_version"] == 3
     assert calibration_dict(rec) is rec.data
 
 

@@ -80,7 +80,7 @@ def test_calibration_file_keeps_the_survey(joint, tmp_path):
     path = tmp_path / "calib.json"
     joint.to_json(path)
     out = json.loads(path.read_text())
-    assert out["schema_version"] == 2
+    assert out["schema_version"] == 3
     assert [r["case"] for r in out["runs"]] == ["transect1", "transect2"]
     assert len(out["moving_bed_velocity_m_s"]) == 2 and len(out["moving_bed_velocity_se_m_s"]) == 2
     assert all(len(r["moving_bed_velocity_m_s"]) == 2 for r in out["runs"])
