@@ -75,6 +75,26 @@ def _summary(rows: list) -> dict:
     return out
 
 
+def markdown_table(res: dict) -> str:
+    """The README's table: per error and size, each file's and base's first verdict (bold when the
+    injected error's effect is named first), from the rows as measured."""
+    cols = list(dict.fromkeys((r["file"], r["navigation"]) for r in res["rows"]))
+    trials = list(dict.fromkeys((r["error"], r["size"]) for r in res["rows"]))
+    cell = {(r["file"], r["navigation"], r["error"], r["size"]): r for r in res["rows"]}
+    lines = ["| error, size (first verdict; **bold** = the injected error's effect named first) | "
+             + " | ".join(f"{f.split('.')[0]} {n}" for f, n in cols) + " |", "|---|" + "---|" * len(cols)]
+    for error, size in trials:
+        row = []
+        for f, n in cols:
+            r = cell.get((f, n, error, size))
+            text = "" if r is None else r["verdict"]
+            if r is not None and "shift_z" in r:  # the file's own effect: its estimate moved, or not
+                text += f" (own {r['expected']} moved {r['shift_z']:.1f} SE)"
+            row.append(f"**{text}**" if r is not None and r["hit"] and error != "clean" else text)
+        lines.append(f"| {error} {size:g} | " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
 def print_diagnosis(res: dict) -> None:
     print("\ndiagnosis on real files, field errors injected on the recorded channels, clean file's calibration")
     for nav, s in res["summary"].items():
@@ -88,6 +108,7 @@ def print_diagnosis(res: dict) -> None:
                   "diagnosed on top of it)")
     for m in res["missing"]:
         print(f"  missing: {m}")
+    print("\n" + markdown_table(res) + "\n")
     best = max((s["top1"] or 0) for s in res["summary"].values()) if res["summary"] else 0
     alarms = sum(s["false_alarms"] for s in res["summary"].values())
     print_targets(res, [

@@ -9,9 +9,8 @@ vectors serve Measurements 1 and 2). Angles in the TOML carry their unit in the 
 
 from __future__ import annotations
 
-import copy
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
@@ -21,6 +20,8 @@ from ..models.motion import AttitudeParams
 from ..models.navigation import Navigation
 from ..models.sensors import ATTITUDE_FRAMES
 from .case import Vessel, parse_utc
+from .survey_spec import nominal_transect
+from .tables import angles_in_radians, build, deep_merge
 
 TIMINGS = ("two_way", "instantaneous")
 TRAVEL_TIMES = ("exact", "paper")
@@ -202,41 +203,8 @@ class Scenario:
 
 # ---------------------------------------------------------------- TOML loading
 
-def _angles(d: dict, owner: str) -> dict:
-    """Turn ``*_deg`` keys into ``*_rad`` (values or lists)."""
-    out = {}
-    for k, v in d.items():
-        if k.endswith("_deg"):
-            out[k[:-4] + "_rad"] = np.deg2rad(np.asarray(v, dtype=float)).tolist()
-        else:
-            out[k] = v
-    return out
-
-
-def _build(cls, d: dict, owner: str, **extra):
-    d = dict(d)
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(d) - known)
-    if unknown:
-        raise ValueError(f"{owner}: unknown key(s) {unknown}; expected some of {sorted(known)}")
-    for k, v in d.items():
-        if isinstance(v, list):
-            d[k] = tuple(tuple(x) if isinstance(x, list) else x for x in v)
-    return cls(**d, **extra)
-
-
-def _deep_merge(base: dict, over: dict) -> dict:
-    out = copy.deepcopy(base)
-    for k, v in over.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _deep_merge(out[k], v)
-        else:
-            out[k] = copy.deepcopy(v)
-    return out
-
-
 def _motion(d: dict, owner: str) -> AttitudeParams:
-    d = _angles(d, owner)
+    d = angles_in_radians(d, owner)
     allowed = {"roll_modes", "roll_bias_rad", "pitch_modes", "pitch_bias_rad", "yaw_trend", "yaw_coupling", "t_ref_s",
                "yaw_modes"}
     unknown = sorted(set(d) - allowed)
@@ -247,30 +215,30 @@ def _motion(d: dict, owner: str) -> AttitudeParams:
         d.get("yaw_trend", [0.0]), d.get("yaw_coupling"), float(d.get("t_ref_s", 0.0)), d.get("yaw_modes", ()))
 
 
-def _platform(d: dict, source: str) -> Platform:
+def platform_from_table(d: dict, source: str) -> Platform:
     owner = f"{source}: platform"
     return Platform(
         name=d["name"],
         description=d.get("description", ""),
-        vessel=_build(Vessel, d.get("vessel", {}), owner + ".vessel"),
-        instrument=_build(InstrumentSpec, _angles(d["instrument"], owner), owner + ".instrument"),
-        mounting=_build(Mounting, _angles(d["mounting"], owner), owner + ".mounting"),
+        vessel=build(Vessel, d.get("vessel", {}), owner + ".vessel"),
+        instrument=build(InstrumentSpec, angles_in_radians(d["instrument"], owner), owner + ".instrument"),
+        mounting=build(Mounting, angles_in_radians(d["mounting"], owner), owner + ".mounting"),
     )
 
 
-def _run(name: str, d: dict, source: str) -> Run:
+def run_from_table(name: str, d: dict, source: str) -> Run:
     owner = f"{source}: runs.{name}"
-    d = _angles(d, owner)
+    d = angles_in_radians(d, owner)
     d["name"] = name
     d["motion"] = _motion(d.get("motion", {}), owner + ".motion")
-    d["navigation"] = _build(Navigation, d.get("navigation", {}), owner + ".navigation")
+    d["navigation"] = build(Navigation, d.get("navigation", {}), owner + ".navigation")
     if "water" in d:
-        d["water"] = _build(WaterProfile, d["water"], owner + ".water")
-    d["noise"] = _build(Noise, _angles(d.get("noise", {}), owner), owner + ".noise")
-    d["doppler"] = _build(DopplerModel, d.get("doppler", {}), owner + ".doppler")
+        d["water"] = build(WaterProfile, d["water"], owner + ".water")
+    d["noise"] = build(Noise, angles_in_radians(d.get("noise", {}), owner), owner + ".noise")
+    d["doppler"] = build(DopplerModel, d.get("doppler", {}), owner + ".doppler")
     if "site" in d:
-        d["site"] = _build(Site, _angles(d["site"], owner), owner + ".site")
-    return _build(Run, d, owner)
+        d["site"] = build(Site, angles_in_radians(d["site"], owner), owner + ".site")
+    return build(Run, d, owner)
 
 
 def load_scenario_file(path) -> dict[str, Scenario]:
@@ -278,7 +246,7 @@ def load_scenario_file(path) -> dict[str, Scenario]:
     path = Path(path)
     with open(path, "rb") as fh:
         data = tomllib.load(fh)
-    platform = _platform(data["platform"], path.name)
+    platform = platform_from_table(data["platform"], path.name)
     defaults = data.get("defaults", {})
     surveys = data.get("survey", {})
     missing = sorted(set(surveys) - set(data.get("runs", {})))
@@ -286,12 +254,10 @@ def load_scenario_file(path) -> dict[str, Scenario]:
         raise ValueError(f"{path.name}: survey.{missing[0]}: expected a run template [runs.{missing[0]}], got none")
     out = {}
     for name, run in data.get("runs", {}).items():
-        merged = _deep_merge(defaults, run)
+        merged = deep_merge(defaults, run)
         if name in surveys:  # a survey's template: listed as its first transect (cases/survey.py)
-            from .survey import nominal_transect
-
             merged = nominal_transect(name, surveys[name], merged, path.name)
-        out[name] = Scenario(name, platform, _run(name, merged, path.name))
+        out[name] = Scenario(name, platform, run_from_table(name, merged, path.name))
     return out
 
 

@@ -39,7 +39,7 @@ from .attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from .calibration_result import CalibrationResult, RunResult, jsonable
 from .formulations import FORMULATIONS
 from .hac import sandwich
-from .moving_bed_test import mean_flow_speed, moving_bed_test
+from .moving_bed_decision import mean_flow_speed, moving_bed_test
 from .measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
                                 heading_span, knot_times)
 from .uncertainty import uncertainty
@@ -120,7 +120,7 @@ class CalibrationConfig:
     moving_bed : str
         The bed moving under the bottom track (bed load; the reference does not see it):
         ``auto`` (with a moving reference a constant bed, kept only when the data say it moves:
-        :func:`~adcpdyn.estimators.moving_bed_test.moving_bed_test`, reported in
+        :func:`~adcpdyn.estimators.moving_bed_decision.moving_bed_test`, reported in
         ``moving_bed_test``; else ``off``), ``off`` (a bed verified
         fixed, e.g. by a loop or stationary test), ``constant`` (one velocity, north and east,
         shared by the runs) or ``section`` (a piecewise-linear function of the position along
@@ -418,7 +418,7 @@ class CalibrationProblem:
 
     # ------------------------------------------------------------------ solve
     def solve(self) -> CalibrationResult:
-        """Solve; with ``moving_bed="auto"`` the fitted bed is tested (:mod:`.moving_bed_test`) and,
+        """Solve; with ``moving_bed="auto"`` the fitted bed is tested (:mod:`.moving_bed_decision`) and,
         unless the data say it moves, dropped and the problem solved again without it."""
         result = self._solve()
         if not (self.config.moving_bed == "auto" and self.moving_bed == "constant"):

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -389,19 +390,27 @@ def _plain(obj):
 
 
 def as_calibration(d) -> Calibration:
-    """A calibration handed over in memory, validated: a :class:`Calibration` as it is, any
-    other dict (e.g. ``CalibrationResult.to_dict()``) with the writer's convention (numpy
-    values as numbers, NaN and infinities as null: not determined). A file is stricter:
-    NaN or Infinity there is an error (:func:`read_calibration`). Anything else (a CALIB.json
-    path, a ``CalibrationResult``, a ``CalibrationRecord``) goes through
-    :func:`~adcpdyn.estimators.calibration_record.calibration_dict`."""
+    """A calibration in any form it is handed over in, validated once: a :class:`Calibration` as
+    it is; a CALIB.json path read (:func:`read_calibration`); an object with ``to_dict()`` (a
+    ``CalibrationResult``, its CALIB.json form; a ``CalibrationRecord``, its validated file) or
+    any other dict with the writer's convention (numpy values as numbers, NaN and infinities as
+    null: not determined). A file is stricter: NaN or Infinity there is an error.
+
+    Raises
+    ------
+    ValueError
+        One line naming the key; or naming ``calibration`` for an object of another type.
+    """
     if isinstance(d, Calibration):
         return d
+    if isinstance(d, (str, os.PathLike)):
+        return read_calibration(Path(d))
+    if not isinstance(d, dict) and callable(getattr(d, "to_dict", None)):
+        d = d.to_dict()
     if not isinstance(d, dict):
-        from .calibration_record import calibration_dict
-
-        return calibration_dict(d)
-    return validate_calibration(_plain(d))
+        raise ValueError(f"calibration: expected a CALIB.json path, a dict, a CalibrationResult or a CalibrationRecord, "
+                         f"got {type(d).__name__}")
+    return d if isinstance(d, Calibration) else validate_calibration(_plain(d))
 
 
 def read_calibration(path) -> Calibration:

@@ -11,17 +11,16 @@ per-start table, the uncertainty object and the configuration dataclass are not 
 CALIB.json in a form worth rebuilding; the parsed file stays available (:attr:`data`).
 
 :func:`calibration_dict` turns any way a calibration is handed over (a CALIB.json path,
-a parsed dict, a :class:`CalibrationResult`, a :class:`CalibrationRecord`) into the
+a parsed dict, a :class:`CalibrationResult`, a :class:`CalibrationRecord`, or None) into the
 validated dict (:class:`~adcpdyn.estimators.calibration_file.Calibration`) the
-estimators read; :func:`~adcpdyn.estimators.calibration_file.as_calibration` delegates
-to it for anything that is not a dict.
+estimators read, through :func:`~adcpdyn.estimators.calibration_file.as_calibration`, which
+knows every form by its shape (path, dict, ``to_dict()``): the file, record and result modules
+import one way only (result -> record -> file).
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -258,13 +257,9 @@ class CalibrationRecord:
         return self.data
 
 
-def _result_dict(result) -> Calibration:
-    """A CalibrationResult handed over in memory: its CALIB.json form, validated, with its provenance."""
-    return as_calibration(result.to_dict())
-
-
 def calibration_dict(calibration) -> Calibration | None:
-    """The validated CALIB.json dict the estimators read, from any form a calibration is handed over in.
+    """The validated CALIB.json dict the estimators read, from any form a calibration is handed over in
+    (:func:`~adcpdyn.estimators.calibration_file.as_calibration`), or None for None.
 
     Parameters
     ----------
@@ -272,28 +267,10 @@ def calibration_dict(calibration) -> Calibration | None:
         A CALIB.json path (read and validated; the dict's ``source`` is the path), a parsed
         file or ``CalibrationResult.to_dict()``, a result in memory, or a typed record.
 
-    Returns
-    -------
-    Calibration or None
-        None for None.
-
     Raises
     ------
     ValueError
         One line naming the key, for an invalid file or dict; or naming ``calibration``
         for an object of another type.
     """
-    from .calibration_result import CalibrationResult
-
-    if calibration is None:
-        return None
-    if isinstance(calibration, (str, os.PathLike)):
-        return read_calibration(Path(calibration))
-    if isinstance(calibration, CalibrationRecord):
-        return calibration.data
-    if isinstance(calibration, CalibrationResult):
-        return _result_dict(calibration)
-    if isinstance(calibration, dict):
-        return as_calibration(calibration)
-    raise ValueError(f"calibration: expected a CALIB.json path, a dict, a CalibrationResult or a CalibrationRecord, "
-                     f"got {type(calibration).__name__}")
+    return None if calibration is None else as_calibration(calibration)
