@@ -307,7 +307,7 @@ def _suite(suite: str, quick: bool):
         from .survey import bench_survey, figure_survey, print_survey
 
         res = bench_survey([1, 2, 4] if quick else [1, 2, 3, 4, 5, 6], surveys=2 if quick else 10,
-                           coverage_seeds=10 if quick else 40)
+                           coverage_seeds=10 if quick else 40, heading_seeds=5 if quick else 20)
         return res, print_survey, figure_survey
     from .scale import bench_scale, figure_scale, print_scale
 

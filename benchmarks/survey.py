@@ -13,7 +13,9 @@ Three parts, each from the same code path as ``calibrate --joint``:
 * coverage: two-transect surveys with AR(1) bottom-track and GNSS noise (lag-1 0.7 and 0.5)
   and the scenario's drawn compass deviation: the share of seeds whose misalignment and bed
   errors are within 3 standard errors, for the reported SEs (Newey-West, compass-deviation
-  prior) and for the white-noise ones.
+  prior) and for the white-noise ones;
+* heading coverage: surveys of 2 and 4 transects with a compass-grade heading noise (1 deg): the
+  share of errors within 3 SE and the RMS of error/SE, misalignment and every run's bed.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from .common import Target, machine, print_targets, save_figure
 
 FAST_PINGS_S = (0.30, 0.45)  # ping interval giving ~400 pings per 150-s transect
 BT_AR1, REFERENCE_AR1 = 0.7, 0.5
+COMPASS_HEADING_NOISE_DEG = 1.0  # a magnetic compass's reading noise (TRDI quotes +-2 deg accuracy, 0.5-1 deg noise)
 
 
 def _transects(runs: int, seed: int, fast: bool = False, noise: dict | None = None, **options) -> list:
@@ -82,7 +85,7 @@ def _scores(r, truth: dict, run_index=None) -> dict:
             "confounded": [c["pair"] for c in r.confounded], "success": r.success, "status": r.multistart.status}
 
 
-def bench_survey(sizes, surveys: int, coverage_seeds: int, starts: int = 24) -> dict:
+def bench_survey(sizes, surveys: int, coverage_seeds: int, starts: int = 24, heading_seeds: int = 20) -> dict:
     out = {"suite": "survey", "machine": machine(), "starts": starts, "sizes": list(sizes)}
     # ---- scale: one survey of the largest size, its first K transects
     cases = _transects(max(sizes), 1, fast=True)
@@ -121,6 +124,34 @@ def bench_survey(sizes, surveys: int, coverage_seeds: int, starts: int = 24) -> 
         r, setup, solve = _solve(cases, 8)
         cov.append({"seed": 300 + seed, "time_s": setup + solve, **_scores(r, _truth(cases))})
     out["coverage"] = {"bt_ar1": BT_AR1, "reference_ar1": REFERENCE_AR1, "rows": cov}
+    out["heading_coverage"] = heading_coverage(heading_seeds)
+    return out
+
+
+def heading_coverage(seeds: int, heading_deg: float = COMPASS_HEADING_NOISE_DEG, runs=(2, 4)) -> dict:
+    """Coverage under a compass-grade heading noise (the noise is in the regressors: the beams'
+    rotation and the compass deviation's argument): surveys of 2 and 4 transects, each seed's
+    misalignment and every run's bed error over its reported SE."""
+    rows = []
+    for K in runs:
+        for seed in range(1, seeds + 1):
+            cases = _transects(K, 500 + seed, noise={"heading_rad": float(np.deg2rad(heading_deg))})
+            r, setup, solve = _solve(cases, 8)
+            rows.append({"runs": K, "seed": 500 + seed, "time_s": setup + solve, **_scores(r, _truth(cases))})
+    return {"heading_deg": heading_deg, "rows": rows}
+
+
+def heading_coverage_summary(cov: dict) -> dict:
+    """Per number of runs: the share of |error| <= 3 SE and the RMS of error/SE, misalignment and bed."""
+    out = {}
+    for K in sorted({r["runs"] for r in cov["rows"]}):
+        rows = [r for r in cov["rows"] if r["runs"] == K]
+        zm = np.array([r["misalignment_error_deg"] / r["misalignment_se_deg"] for r in rows])
+        zb = np.concatenate([np.ravel(np.asarray(r["bed_error_m_s"], float) / np.asarray(r["bed_se_m_s"], float))
+                             for r in rows])
+        out[K] = {"surveys": len(rows), "misalignment_within_3se": float(np.mean(np.abs(zm) <= 3)),
+                  "misalignment_rms_z": float(np.sqrt(np.mean(zm**2))), "bed_within_3se": float(np.mean(np.abs(zb) <= 3)),
+                  "bed_rms_z": float(np.sqrt(np.mean(zb**2)))}
     return out
 
 
@@ -168,6 +199,11 @@ def print_survey(res: dict) -> None:
     print(f"\ncoverage: {len(cov)} two-transect surveys with AR(1) noise (bottom track {res['coverage']['bt_ar1']}, GNSS "
           f"{res['coverage']['reference_ar1']}): misalignment and bed errors within 3 SE in {100 * hac:.0f} % of seeds with "
           f"the reported SEs, {100 * white:.0f} % with white-noise SEs (misalignment SE inflation median x{np.median(infl):.2f})")
+    heading = heading_coverage_summary(res["heading_coverage"]) if "heading_coverage" in res else {}
+    for K, h in heading.items():
+        print(f"heading noise {res['heading_coverage']['heading_deg']:g} deg, {K} transects, {h['surveys']} surveys: "
+              f"misalignment within 3 SE {100 * h['misalignment_within_3se']:.0f} % (RMS error/SE "
+              f"{h['misalignment_rms_z']:.2f}), beds {100 * h['bed_within_3se']:.0f} % (RMS {h['bed_rms_z']:.2f})")
     four = next((r for r in rows if r["runs"] == 4), None)
     acc = res["accuracy"]
     targets = []
@@ -188,6 +224,13 @@ def print_survey(res: dict) -> None:
                     Target("single transects within 3 SE or reported undetermined (share)", float(np.mean(ok_single)),
                            all(ok_single))]
     targets.append(Target("coverage under AR(1) noise: |error| <= 3 SE in >= 95 % of seeds", hac, hac >= 0.95))
+    for K, h in heading.items():
+        share = min(h["misalignment_within_3se"], h["bed_within_3se"])
+        rms = (h["misalignment_rms_z"], h["bed_rms_z"])
+        targets += [Target(f"heading noise, {K} transects: |error| <= 3 SE in >= 95 % (misalignment and beds, lower)",
+                           share, share >= 0.95),
+                    Target(f"heading noise, {K} transects: RMS error/SE within 0.7-1.3 (misalignment, beds: worse)",
+                           max(rms, key=lambda z: abs(np.log(z))), all(0.7 <= z <= 1.3 for z in rms))]
     print_targets(res, targets)
 
 

@@ -69,7 +69,8 @@ class Platform:
 class Noise:
     """Measurement noise (1-sigma) and sensor resolution.
 
-    ``bt_ar1`` and ``reference_ar1`` colour the bottom-track and reference (GNSS) noise:
+    ``bt_ar1``, ``reference_ar1`` and ``heading_ar1`` colour the bottom-track, reference (GNSS)
+    and heading noise:
     lag-1 autocorrelation from sample to sample of an AR(1) process with the same
     stationary variance as the white noise (0, the default, is white).
     """
@@ -86,9 +87,10 @@ class Noise:
     reference_m_s: float = 0.003
     bt_ar1: float = 0.0  # lag-1 autocorrelation of the BT noise from ping to ping
     reference_ar1: float = 0.0  # ... of the reference velocity noise from sample to sample
+    heading_ar1: float = 0.0  # ... of the heading noise from sample to sample (a compass's slowly wandering error)
 
     def __post_init__(self):
-        for name in ("bt_ar1", "reference_ar1"):
+        for name in ("bt_ar1", "reference_ar1", "heading_ar1"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and -1.0 < value < 1.0):
                 raise ValueError(f"noise.{name}: expected a lag-1 autocorrelation in (-1, 1), got {value!r}")

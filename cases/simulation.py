@@ -112,7 +112,9 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
     for effect, params in effects:  # latency, low-pass, compass deviation
         read = effect.wrap_attitude_sensor(read, params)
     ypr = read(t_att)
-    ypr = ypr + rng.normal(size=ypr.shape) * np.array([noise.heading_rad, noise.tilt_rad, noise.tilt_rad])
+    white = rng.normal(size=ypr.shape)
+    white[:, 0] = ar1_noise(white[:, 0], noise.heading_ar1)  # a compass's error wanders (identical when 0)
+    ypr = ypr + white * np.array([noise.heading_rad, noise.tilt_rad, noise.tilt_rad])
     ypr = quantise(ypr, noise.attitude_resolution_rad)
     attitude = Attitude(t_att, wrap_heading(ypr[:, 0]), ypr[:, 1], ypr[:, 2], frame=pf.mounting.attitude_frame)
     heading_truth = effective_heading(effects, true_read, t_att)

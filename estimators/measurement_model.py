@@ -607,9 +607,10 @@ class SurveyModel:
         ypr_s = ca.vertcat(ypr[0], tilt)
         Lam_s = euler_matrix(ypr_s[0], ypr_s[1], ypr_s[2])
         dLam_s = ca.reshape(ca.jacobian(ca.vec(Lam_s), t), 3, 3)
-        delta = compass_correction(ypr_s[0], h[0], h[1], h[2], *self.heading_centre) if self.heading is not None else 0
+        slow = p[7]  # the deviation's argument: the slow heading, not the reading's noise (errors in variables)
+        delta = compass_correction(slow, h[0], h[1], h[2], *self.heading_centre) if self.heading is not None else 0
         for (e, _), th in zip(terms, ths):
-            delta = delta + e.sampled_heading_correction(ypr_s[0], th)
+            delta = delta + e.sampled_heading_correction(slow, th)
         Rz = euler_matrix(delta, 0, 0)
         Lam, dLam = ca.mtimes(Rz, Lam_s), ca.mtimes(Rz, dLam_s)  # a heading error turns the rotation (motion.heading_corrected_function)
         Omega = ca.mtimes(dLam, Lam.T)

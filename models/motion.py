@@ -258,14 +258,18 @@ def attitude_function(layout: AttitudeLayout, sym=ca.SX) -> ca.Function:
     return _attitude_from_ypr(t, p, attitude_ypr(t, p, layout))
 
 
-LOCAL_ATTITUDE_SIZE = 7
+LOCAL_ATTITUDE_SIZE = 8
+DEVIATION_BAND_RAD_S = 0.1  # the compass deviation's heading: the samples' heading smoothed above this (periods < 1 min)
 
 
 def local_attitude_function(sym=ca.SX) -> ca.Function:
     """The measured attitude about one time, as an attitude model: same signature as
-    :func:`attitude_function`, with p = [t_k, yaw, pitch, roll (rad), their rates (rad/s)]
-    and ypr(t) = ypr_k + rate (t - t_k). With p from :func:`local_attitude_params` it is
-    the sensor's samples interpolated linearly (used when no motion model fits the run)."""
+    :func:`attitude_function`, with p = [t_k, yaw, pitch, roll (rad), their rates (rad/s),
+    the slow heading] and ypr(t) = ypr_k + rate (t - t_k). With p from
+    :func:`local_attitude_params` it is the sensor's samples interpolated linearly (used when no
+    motion model fits the run). The slow heading (``p[7]``, the samples' heading smoothed over a
+    minute) is what a compass deviation is a function of: the noisy reading there would make the
+    deviation a regression on the compass's own noise (errors in variables)."""
     t = sym.sym("t")
     p = sym.sym("p", LOCAL_ATTITUDE_SIZE)
     return _attitude_from_ypr(t, p, p[1:4] + p[4:7] * (t - p[0]))
@@ -281,7 +285,7 @@ def local_attitude_params(time_s, ypr_rad, times) -> np.ndarray:
     j = np.clip(np.searchsorted(time_s, times, side="right") - 1, 0, time_s.size - 2)
     slope = (ypr[j + 1] - ypr[j]) / (time_s[j + 1] - time_s[j])[:, None]
     at = ypr[j] + slope * (times - time_s[j])[:, None]
-    return np.vstack([times, at.T, slope.T])
+    return np.vstack([times, at.T, slope.T, at[:, 0]])
 
 
 SAMPLE_INTERPOLATIONS = ("spline", "linear")
@@ -338,6 +342,7 @@ class SampledAttitude:
         if splines is None:
             p = local_attitude_params(self.time_s, self.ypr_rad, times)
             p[2:4] += tilt_lead_s * p[5:7]
+            p[7] = self.deviation_heading_at(times)
             return p
         times = np.asarray(times, dtype=float).reshape(-1)
         inside = np.clip(times, self.time_s[0], self.time_s[-1])  # held beyond the record, never extrapolated by the spline
@@ -347,7 +352,26 @@ class SampledAttitude:
             accel = np.column_stack([s.derivative(2)(inside) for s in splines[1:]])
             at[:, 1:] += tilt_lead_s * rate[:, 1:]
             rate[:, 1:] += tilt_lead_s * accel
-        return np.vstack([inside, at.T, rate.T])
+        return np.vstack([inside, at.T, rate.T, self.deviation_heading_at(inside)])
+
+    @functools.cached_property
+    def _slow_heading(self):
+        from scipy.interpolate import make_smoothing_spline
+
+        t = np.asarray(self.time_s, dtype=float)
+        if t.size < MIN_SPLINE_SAMPLES:
+            return None
+        dt = float(np.median(np.diff(t)))
+        lam = (1 / BAND_RESPONSE - 1) / (dt * DEVIATION_BAND_RAD_S**4)
+        return make_smoothing_spline(t, np.unwrap(np.asarray(self.ypr_rad, dtype=float)[:, 0]), lam=lam)
+
+    def deviation_heading_at(self, times) -> np.ndarray:
+        """The heading a compass deviation is evaluated at (rad, unwrapped like :meth:`params_at`'s):
+        the samples' heading smoothed above ``DEVIATION_BAND_RAD_S``, following turns of a minute and
+        longer, not the reading's noise; the linear interpolation where too few samples."""
+        times = np.clip(np.asarray(times, dtype=float).reshape(-1), self.time_s[0], self.time_s[-1])
+        spline = self._slow_heading
+        return self.heading_at(times) if spline is None else spline(times)
 
     def heading_at(self, times) -> np.ndarray:
         """Heading (rad, unwrapped) interpolated linearly, held at the end values outside the samples."""

@@ -160,7 +160,7 @@ def solve_bottom_track(layout: AttitudeLayout | None, attitude_p, lever_arms_m, 
     ``casadi.rootfinder``, for pings with four beams.
 
     ``attitude_p`` packs the attitude model of the sensor frame (``layout`` None: the sensor's
-    samples instead, ``ping_attitude`` (7, N) from :meth:`~adcpdyn.models.motion.SampledAttitude.params_at`
+    samples instead, ``ping_attitude`` (8, N) from :meth:`~adcpdyn.models.motion.SampledAttitude.params_at`
     at the ping times, ``attitude_p`` empty), ``lever_arms_m`` (4, 3)
     are in that frame and ``ypr_st_rad`` turns the transducer frame into it; ``g_depth_m``
     is the depth of the centre of rotation. Pings whose residual stays above

@@ -318,7 +318,7 @@ def test_heading_correction_is_a_yaw_offset_and_turns_the_rotation():
 
     f = local_attitude_function()
     g = heading_corrected_function(f, mean_sin=0.3, mean_cos=-0.2)
-    p = np.array([0.0, 1.0, 0.1, 0.2, 0.3, 0.01, 0.02])
+    p = np.array([0.0, 1.0, 0.1, 0.2, 0.3, 0.01, 0.02, 1.0])  # ..., the slow heading (p[7])
     shifted = p.copy()
     shifted[1] += 0.2
     out, ref = g(0.5, np.r_[p, 0.2, 0.0, 0.0]), f(0.5, shifted)
