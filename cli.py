@@ -278,6 +278,8 @@ def cmd_correct(args) -> int:
         return _run_batch(args, jobs, [("pings", "pings", 8, str), ("speed m/s", "mean_horizontal_speed_m_s", 11, "{:.4f}".format),
                                        ("3-beam", "three_beam", 8, str), ("lost", "lost", 6, str)])
     args.case = args.case[0]
+    if Path(args.out).suffix.lower() not in (".h5", ".nc"):
+        raise ValueError(f"--out: expected OUT.h5 (the corrected file) or OUT.nc (CF netCDF), got {args.out!r}")
     check_output_file(args.out, args.case, args.calibration)
     command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
                + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
@@ -340,11 +342,14 @@ def cmd_compare(args) -> int:
 def _calibration_config(args, formulation=None):
     from .estimators.calibration import CalibrationConfig
 
+    if args.bed_knots is not None and args.moving_bed != "section":
+        raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
+                         f"{args.moving_bed} (drop it, or use --moving-bed section)")
     declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
     return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
                              jacobian=args.jacobian, attitude=args.attitude, moving_bed=args.moving_bed,
-                             moving_bed_section_knots=args.bed_knots, compass_deviation=args.compass_deviation,
+                             moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
                              standard_errors=args.standard_errors, magnetic_declination_rad=declination)
 
 
@@ -416,6 +421,11 @@ def cmd_calibrate(args) -> int:
         return _run_batch(args, jobs, [("objective", "objective", 12, "{:.6g}".format),
                                        ("max viol", "max_constraint_violation", 10, "{:.1e}".format),
                                        ("at best", "fraction_at_best", 9, "{:.2f}".format)])
+    if args.joint and args.method == "two-stage":
+        raise ValueError("--method two-stage: the paper's two-stage baseline calibrates one run in two steps; --joint "
+                         "is the one-NLP calibration of several runs (drop one of them)")
+    if Path(args.out).suffix.lower() != ".json":
+        raise ValueError(f"--out: expected a CALIB.json file name ending in .json (calibrate writes JSON), got {args.out!r}")
     paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
     check_output_file(args.out, *paths)
     config = _calibration_config(args)
@@ -520,6 +530,12 @@ def cmd_demo(args) -> int:
 
 
 def cmd_diagnose(args) -> int:
+    if args.selftest and args.case:
+        raise ValueError(f"diagnose: --selftest {args.selftest} simulates its own cases; {' '.join(args.case)} would be "
+                         "ignored (drop it, or use --field-selftest to test your file)")
+    if args.out and not args.selftest and Path(args.out).suffix.lower() != ".json":
+        raise ValueError(f"--out: expected a file name ending in .json (DIAG.json; the .md and figure go beside it), "
+                         f"got {args.out!r}")
     if args.given and (args.selftest or args.field_selftest):
         raise ValueError("diagnose: --given names a run's own effects; --selftest and --field-selftest find them "
                          "themselves (drop --given)")
@@ -624,6 +640,13 @@ def _int_at_least(low: int):
             raise argparse.ArgumentTypeError(f"expected an integer >= {low}, got {text!r}")
         return value
     return parse
+
+
+def _angle_deg(text: str) -> float:
+    value = _finite(text)
+    if not -180.0 <= value <= 180.0:
+        raise argparse.ArgumentTypeError(f"expected an angle in degrees within +-180, got {text!r}")
+    return value
 
 
 def _finite(text: str) -> float:
@@ -751,15 +774,17 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--jacobian", default="auto", choices=["auto", "symbolic", "assembled"],
                        help="symbolic (whole problem differentiated by CasADi) or assembled (per row, long runs)")
         s.add_argument("--moving-bed", default="auto", choices=["auto", "off", "constant", "section"],
-                       help="bed moving under the bottom track: auto (constant with a moving reference), off (a bed "
-                            "verified fixed), constant, or section (a function of the position along the section)")
-        s.add_argument("--bed-knots", type=_int_at_least(2), default=3, help="--moving-bed section: values across the section")
+                       help="bed moving under the bottom track: auto (with a moving reference a constant bed, kept only "
+                            "when a test says it moves), off (a bed verified fixed), constant, or section (a function "
+                            "of the position along the section)")
+        s.add_argument("--bed-knots", type=_int_at_least(2), default=None,
+                       help="--moving-bed section: values across the section (default 3)")
         s.add_argument("--compass-deviation", default="auto", choices=["auto", "on", "off"],
                        help="head sensor: add B sin(heading) + C cos(heading) to the misalignment (auto: with a prior, "
                             "when the headings span enough)")
         s.add_argument("--standard-errors", default="hac", choices=["hac", "white"],
                        help="hac (Newey-West sandwich, coloured residuals) or white")
-        s.add_argument("--declination-deg", type=_finite,
+        s.add_argument("--declination-deg", type=_angle_deg,
                        help="magnetic declination at the site (east positive), when the cases carry no position and date")
 
     s = command("calibrate", "estimate attitude model, lever arms and installation angles (one or many cases)",

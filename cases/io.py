@@ -834,6 +834,9 @@ def read_case(path) -> Case:
         raise FileNotFoundError(f"{source}: no such file")
     if os.path.isdir(source):
         rd.c.fail("/", "expected an HDF5 file, got a folder")
+    kind = _other_file_kind(source)
+    if kind:
+        rd.c.fail("/", f"expected an adcpdyn case (HDF5, format adcp-case), got {kind}")
     try:
         f = h5py.File(source, "r")
     except FileNotFoundError:
@@ -841,9 +844,26 @@ def read_case(path) -> Case:
     except OSError as exc:
         rd.c.fail("/", f"expected an HDF5 file, got an unreadable file ({exc})")
     with f:
+        if "format" not in f["/"].attrs and ("_NCProperties" in f["/"].attrs or "Conventions" in f["/"].attrs):
+            rd.c.fail("/", "expected an adcpdyn case (HDF5, format adcp-case), got a netCDF file (an export: "
+                           "`adcpdyn export` writes these from a case; give the case itself)")
         case = _read(f, rd)
     validate_case(case, source=source)
     return case
+
+
+def _other_file_kind(source: str) -> str | None:
+    """What a file that is not HDF5 evidently is (a CALIB.json, an instrument file), from its first bytes."""
+    with open(source, "rb") as fh:
+        head = fh.read(64)
+    if head.startswith(b"\x89HDF"):
+        return None
+    text = head.lstrip()
+    if text.startswith(b"{"):
+        return "a JSON file (a CALIB.json or DIAG.json? `adcpdyn calibrate` writes them; cases are .h5)"
+    if head[:2] == b"\x7f\x7f":
+        return "a TRDI PD0 file (run `adcpdyn import` on it first)"
+    return None
 
 
 # ----------------------------------------------------------------------------------

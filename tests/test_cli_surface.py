@@ -175,3 +175,31 @@ def test_demo_writes_its_figures_in_the_format_asked(tmp_path, capsys):
         assert b"<svg" in (out / f"{name}.svg").read_bytes()[:2000], name
     assert not list(out.glob("*.png"))
     assert "radius_vectors.svg" in capsys.readouterr().out
+
+
+def test_contradicting_options_and_wrong_files_are_refused_in_one_line_naming_them(tmp_path, capsys):
+    """Options that contradict or would be ignored, output names that do not match what is written,
+    and files of another kind (a CALIB.json, a PD0, a netCDF export given as a case) are refused in
+    one line in the user's own flag names and units, exit 2, nothing written."""
+    case, nc, calib = tmp_path / "m1.h5", tmp_path / "m1.nc", tmp_path / "c.json"
+    assert main(["simulate", "pool_m1", "--seed", "1", "--out", str(case)]) == 0
+    assert main(["export", str(case), "--out", str(nc)]) == 0
+    calib.write_text('{"radius_vectors_m": null}')
+    out = tmp_path / "out"
+    cases = {
+        ("calibrate", str(case), "--out", f"{out}.h5"): "--out: expected a CALIB.json file name ending in .json",
+        ("calibrate", str(case), "--declination-deg", "400", "--out", f"{out}.json"): "--declination-deg: expected an angle in degrees within +-180",
+        ("calibrate", str(case), "--moving-bed", "off", "--bed-knots", "5", "--out", f"{out}.json"): "--bed-knots 5: sets the values of --moving-bed section",
+        ("calibrate", "--joint", str(case), str(case), "--method", "two-stage", "--out", f"{out}.json"): "--method two-stage: the paper's two-stage baseline",
+        ("correct", str(case), "--out", f"{out}.csv"): "--out: expected OUT.h5",
+        ("diagnose", "--selftest", "3", str(case)): "--selftest 3 simulates its own cases",
+        ("diagnose", str(case), "--out", f"{out}.h5"): "--out: expected a file name ending in .json",
+        ("info", str(calib)): "got a JSON file (a CALIB.json",
+        ("info", str(nc)): "got a netCDF file (an export",
+    }
+    for argv, words in cases.items():
+        capsys.readouterr()
+        assert main(list(argv)) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1, (argv, err)
+        assert not list(tmp_path.glob("out*")), argv

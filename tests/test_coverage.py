@@ -122,10 +122,11 @@ def test_reference_far_from_the_pings_is_a_one_line_error_before_any_work(m1, tm
 
     with h5py.File(with_h5, "r+") as f:
         f["reference/time_s"][...] = f["reference/time_s"][()] + offset_s
-    assert main([verb, str(with_h5), "--out", str(tmp_path / "out.x")]) == 2
+    out = tmp_path / ("out.h5" if verb == "correct" else "out.json")  # the extension each verb writes
+    assert main([verb, str(with_h5), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "/reference/time_s" in err
-    assert not (tmp_path / "out.x").exists()
+    assert not out.exists()
 
 
 def test_pings_outside_the_attitude_record_are_left_out_with_a_count(m1, tmp_path, calib, capsys):
