@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(VENV)/bin/adcpdyn demo --out demo_out
 
 test: $(STAMP)
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto
 
 bench: $(STAMP)
 	@for suite in correction calibration formulations solvers scale survey diagnosis; do \
