@@ -447,7 +447,6 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     """
     from .cases.hashing import sha256_of
     from .estimators.calibration_record import calibration_dict
-    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run, correct_case
 
     _choice("method", method, CORRECTION_METHODS)
@@ -459,8 +458,8 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         check_output_file(out, *[p for p in (case, calibration) if isinstance(p, (str, os.PathLike))], option="out")
     cal = calibration_dict(calibration)
     src, notes = _prepared(_source(case))
-    c = as_calibrated_run(src.case, src.path or src.case.name, cal)
-    notes = notes + check_calibration_identity(cal, c, accept_other_instrument)
+    c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
+    notes = notes + applied
     result = correct_case(c, method, cal, timing, reference)
     if notes:
         result.attrs["warnings"] = notes
@@ -517,7 +516,6 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
 
     from .cases.coverage import reference_at
     from .estimators.calibration_record import calibration_dict
-    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run, correct_case
     from .estimators.metrics import velocity_metrics
 
@@ -528,8 +526,8 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
         check_output_folder(out, option="out")
     cal = calibration_dict(calibration)
     src, notes = _prepared(_source(case))
-    c = as_calibrated_run(src.case, src.path or src.case.name, cal)
-    notes = notes + check_calibration_identity(cal, c, accept_other_instrument)
+    c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
+    notes = notes + applied
     methods = [m for m in CORRECTION_METHODS if m != "oracle" or c.truth is not None]
     if cal is None:
         methods = [m for m in methods if m in ("asc", "oracle")]
@@ -610,7 +608,6 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         Too few pings, no attitude, an unknown effect or option (one line).
     """
     from .estimators.calibration_record import calibration_dict
-    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
@@ -625,10 +622,13 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         check_output_file(out, *[p for p in [*items, calibration] if isinstance(p, (str, os.PathLike))], option="out")
     cal = calibration_dict(calibration)
     prepared = [_prepared(_source(c, "cases")) for c in items]
-    sources = [dataclasses.replace(s, case=as_calibrated_run(s.case, s.path or s.case.name, cal)) for s, _ in prepared]
-    sources = _keyed(sources)
     notes = [n for _, ns in prepared for n in ns]
-    notes += [n for s in sources for n in check_calibration_identity(cal, s.case, accept_other_instrument)]
+    sources = []
+    for s, _ in prepared:
+        run, applied = as_calibrated_run(s.case, s.path or s.case.name, cal, accept_other_instrument)
+        sources.append(dataclasses.replace(s, case=run))
+        notes += applied
+    sources = _keyed(sources)
     config = _diagnosis_config(effects, attitude, navigation, given)
     run_cases = [s.case for s in sources]
     result = _diagnose(run_cases if many else run_cases[0], config, calibration=cal, progress=progress)
@@ -675,7 +675,6 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
     from .estimators.calibration_record import calibration_dict
-    from .estimators.calibration_identity import check_calibration_identity
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
@@ -690,8 +689,8 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         calibration = calibrate(src.case, n_starts=8)
         note = "calibrated on itself (8 starts): no --calibration given"
     cal = calibration_dict(calibration)
-    run = as_calibrated_run(src.case, src.path or src.case.name, cal)
-    notes = notes + check_calibration_identity(cal, run, accept_other_instrument)
+    run, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
+    notes = notes + applied
     config = _diagnosis_config(effects, attitude, navigation)
     res = _field_selftest(run, cal, config, sizes=sizes, progress=progress)
     res["notes"] = notes + ([note] if note else [])

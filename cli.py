@@ -697,6 +697,10 @@ def build_parser() -> argparse.ArgumentParser:
     def figure_format(s):
         s.add_argument("--format", default="png", choices=FIGURE_FORMATS, help="file format of the figures")
 
+    def accept_other_instrument_option(s):
+        s.add_argument("--accept-other-instrument", action="store_true",
+                       help="apply a calibration whose CALIB.json names another instrument (refused by default)")
+
     command("scenarios", "list the built-in scenarios", cmd_scenarios)
 
     s = command("simulate", "simulate a scenario into a case file (a survey's transects with --runs)", cmd_simulate)
@@ -737,8 +741,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="travel-time model of the dynamic methods: deep (Eqs. 66-70), shallow, or exact (rootfinder, "
                         "oracle: travel time with the moving transducer)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate`")
-    s.add_argument("--accept-other-instrument", action="store_true",
-                   help="apply a calibration whose CALIB.json names another instrument (refused by default)")
+    accept_other_instrument_option(s)
     s.add_argument("--reference", default="bt", choices=REFERENCES,
                    help="water velocities referenced to the bottom track (bt) or to the GNSS velocity (gnss)")
     s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
@@ -751,8 +754,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = command("compare", "every correction method on one case: metrics table and figures", cmd_compare)
     s.add_argument("case", help="CASE.h5 (with /truth, or a GNSS reference)")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (without one: asc and oracle only)")
-    s.add_argument("--accept-other-instrument", action="store_true",
-                   help="apply a calibration whose CALIB.json names another instrument (refused by default)")
+    accept_other_instrument_option(s)
     s.add_argument("--out", help="folder for the table (JSON) and figure")
     figure_format(s)
 
@@ -810,8 +812,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="several runs of one boat together: shared effects (compass, beams, sound speed, latency, lever "
                         "arms) and per-run ones (moving bed, heave, forced roll); whole runs held out too")
     s.add_argument("--calibration", help="CALIB.json from `adcpdyn calibrate` (its platform quantities pinned in the base)")
-    s.add_argument("--accept-other-instrument", action="store_true",
-                   help="apply a calibration whose CALIB.json names another instrument (refused by default)")
+    accept_other_instrument_option(s)
     s.add_argument("--out", help="DIAG.json (DIAG.md and a figure are written beside it)")
     s.add_argument("--effects", nargs="+", metavar="EFFECT", help="catalog effects to try (default: all)")
     s.add_argument("--attitude", default="auto", choices=["auto", "model", "samples"],

@@ -118,11 +118,8 @@ def bench_survey(sizes, surveys: int, coverage_seeds: int, starts: int = 24, hea
                     "joint": _scores(r, truth), "singles": singles})
     out["accuracy"] = acc
     # ---- coverage under coloured noise: two-transect surveys (standard errors small enough for the colour to matter)
-    cov = []
-    for seed in range(1, coverage_seeds + 1):
-        cases = _transects(2, 300 + seed, noise={"bt_ar1": BT_AR1, "reference_ar1": REFERENCE_AR1})
-        r, setup, solve = _solve(cases, 8)
-        cov.append({"seed": 300 + seed, "time_s": setup + solve, **_scores(r, _truth(cases))})
+    cov = _coverage_rows(2, [300 + seed for seed in range(1, coverage_seeds + 1)],
+                         {"bt_ar1": BT_AR1, "reference_ar1": REFERENCE_AR1})
     out["coverage"] = {"bt_ar1": BT_AR1, "reference_ar1": REFERENCE_AR1, "rows": cov}
     out["heading_coverage"] = heading_coverage(heading_seeds)
     return out
@@ -132,13 +129,20 @@ def heading_coverage(seeds: int, heading_deg: float = COMPASS_HEADING_NOISE_DEG,
     """Coverage under a compass-grade heading noise (the noise is in the regressors: the beams'
     rotation and the compass deviation's argument): surveys of 2 and 4 transects, each seed's
     misalignment and every run's bed error over its reported SE."""
-    rows = []
-    for K in runs:
-        for seed in range(1, seeds + 1):
-            cases = _transects(K, 500 + seed, noise={"heading_rad": float(np.deg2rad(heading_deg))})
-            r, setup, solve = _solve(cases, 8)
-            rows.append({"runs": K, "seed": 500 + seed, "time_s": setup + solve, **_scores(r, _truth(cases))})
+    noise = {"heading_rad": float(np.deg2rad(heading_deg))}
+    rows = [{"runs": K, **row} for K in runs for row in _coverage_rows(K, [500 + s for s in range(1, seeds + 1)], noise)]
     return {"heading_deg": heading_deg, "rows": rows}
+
+
+def _coverage_rows(runs: int, seeds, noise: dict) -> list:
+    """Per survey seed (``runs`` transects with ``noise``, 8 starts): the errors and SEs
+    (:func:`_scores`) and the time."""
+    rows = []
+    for seed in seeds:
+        cases = _transects(runs, seed, noise=noise)
+        r, setup, solve = _solve(cases, 8)
+        rows.append({"seed": seed, "time_s": setup + solve, **_scores(r, _truth(cases))})
+    return rows
 
 
 def heading_coverage_summary(cov: dict) -> dict:

@@ -13,6 +13,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .case import format_utc, parse_utc
+
 FREQUENCY_TOLERANCE = 0.05  # relative: 1200 vs 1228.8 kHz is one head's nominal vs carrier figure; models differ by > 15 %
 BEAM_ANGLE_TOLERANCE_DEG = 0.5
 SITE_SPAN_KM = 50.0  # farther apart than a survey reaches: another site
@@ -97,16 +99,11 @@ def site_of(cases) -> Site:
             lat.append(float(np.nanmean(p.latitude_deg)))
             lon.append(float(np.nanmean(p.longitude_deg)))
         if case.time_origin_utc:
-            t0 = _parse(case.time_origin_utc)
+            t0 = parse_utc(case.time_origin_utc)
             starts.append(t0 + _dt.timedelta(seconds=float(case.pings.time_s[0])))
             ends.append(t0 + _dt.timedelta(seconds=float(case.pings.time_s[-1])))
-    fmt = "%Y-%m-%dT%H:%M:%SZ"
     return Site(float(np.mean(lat)) if lat else None, float(np.mean(lon)) if lon else None,
-                min(starts).strftime(fmt) if starts else None, max(ends).strftime(fmt) if ends else None)
-
-
-def _parse(text: str) -> _dt.datetime:
-    return _dt.datetime.fromisoformat(text.replace("Z", "+00:00")).replace(tzinfo=None)
+                format_utc(min(starts)) if starts else None, format_utc(max(ends)) if ends else None)
 
 
 def distance_km(a: Site, b: Site) -> float | None:
@@ -123,7 +120,8 @@ def days_apart(a: Site, b: Site) -> float | None:
     """Days between two sites' spans (0 when they overlap; None when either has no dates)."""
     if None in (a.start_utc, a.end_utc, b.start_utc, b.end_utc):
         return None
-    gap = max(_parse(b.start_utc) - _parse(a.end_utc), _parse(a.start_utc) - _parse(b.end_utc), _dt.timedelta(0))
+    gap = max(parse_utc(b.start_utc) - parse_utc(a.end_utc), parse_utc(a.start_utc) - parse_utc(b.end_utc),
+              _dt.timedelta(0))
     return gap.total_seconds() / 86400.0
 
 

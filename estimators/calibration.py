@@ -557,8 +557,8 @@ class CalibrationProblem:
                          f"{100 * data_share.min():.0f}-{100 * data_share.max():.0f} % of their information (headings span "
                          f"{self.heading_span:.3f}, 0.5 = all round); what the headings leave open enters the bed's and "
                          "the misalignment's standard errors")}
-        declination, declination_note = self._declination()
-        warn += self.identity_warnings
+        declination, declination_note, spread = self._declination()
+        warn += self.identity_warnings + spread
         self._se_x = se_x
         runs = self._run_results(x, e, bed)
         first = runs[0]
@@ -676,26 +676,26 @@ class CalibrationProblem:
         span = "one course" if len(parts) == 1 else "courses"
         return f"{span} over ground {', '.join(parts)} deg"
 
-    def _declination(self) -> tuple[float | None, str]:
+    def _declination(self) -> tuple[float | None, str, list]:
         """The site's magnetic declination: given, else IGRF at each run's position and time (their
-        circular mean: one site), else unknown with the reason."""
+        circular mean: one site), else unknown with the reason; and a warning when the runs'
+        declinations spread wider than one site's."""
         from ..cases.site import case_declination
 
         if self.config.magnetic_declination_rad is not None:
-            return float(self.config.magnetic_declination_rad), "given (CalibrationConfig.magnetic_declination_rad)"
+            return float(self.config.magnetic_declination_rad), "given (CalibrationConfig.magnetic_declination_rad)", []
         found = [case_declination(c) for c in self.cases]
         values = [v for v, _ in found if v is not None]
         if not values:
-            return None, found[0][1] + "; give --declination-deg to compare the misalignment with it"
+            return None, found[0][1] + "; give --declination-deg to compare the misalignment with it", []
         mean = float(np.angle(np.mean(np.exp(1j * np.array(values)))))
         spread = float(np.ptp(np.unwrap(values)))
-        if spread > DECLINATION_SPAN_RAD:
-            self.identity_warnings.append(
-                f"the runs' magnetic declinations span {np.rad2deg(spread):.1f} deg (more than a survey's "
-                f"{np.rad2deg(DECLINATION_SPAN_RAD):g} deg): runs of different sites or years calibrated as one")
+        warn = [] if spread <= DECLINATION_SPAN_RAD else [
+            f"the runs' magnetic declinations span {np.rad2deg(spread):.1f} deg (more than a survey's "
+            f"{np.rad2deg(DECLINATION_SPAN_RAD):g} deg): runs of different sites or years calibrated as one"]
         note = found[0][1] if len(values) == 1 else (f"IGRF-14 over {len(values)} runs: {np.rad2deg(mean):+.2f} deg "
                                                      f"(runs {np.rad2deg(min(values)):+.2f} to {np.rad2deg(max(values)):+.2f})")
-        return mean, note
+        return mean, note, warn
 
     def _run_results(self, x, e, bed) -> list:
         u, model = self.model.unknowns, self.model

@@ -48,10 +48,15 @@ def with_calibrated_depth(case: Case, calibration: dict | None) -> tuple[Case, s
     return case.replace(environment=dataclasses.replace(env, transducer_depth_m=depth)), note
 
 
-def as_calibrated_run(case: Case, path, calibration: dict | None) -> Case:
-    """A joint calibration keys its runs by case name, or by file name when the cases shared one:
-    the case named so that :func:`moving_bed_for` finds its own run."""
+def as_calibrated_run(case: Case, path, calibration: dict | None,
+                      accept_other_instrument: bool = False) -> tuple[Case, list]:
+    """The run a calibration is applied to, and the notes on applying it: the calibration checked
+    to be this instrument's (:func:`~.calibration_identity.check_calibration_identity`, a one-line
+    refusal otherwise), and the case named as the calibration keys its runs (by case name, or by
+    file name when the cases shared one) so that :func:`moving_bed_for` finds its own run."""
     from pathlib import Path
+
+    from .calibration_identity import check_calibration_identity
 
     if calibration is not None and not isinstance(calibration, dict):
         from .calibration_record import calibration_dict
@@ -59,8 +64,8 @@ def as_calibrated_run(case: Case, path, calibration: dict | None) -> Case:
         calibration = calibration_dict(calibration)
     runs = [r.get("case") for r in (calibration or {}).get("runs") or []]
     if case.name not in runs and Path(path).stem in runs:
-        return case.replace(name=Path(path).stem)
-    return case
+        case = case.replace(name=Path(path).stem)
+    return case, check_calibration_identity(calibration, case, accept_other_instrument)
 
 
 def with_moving_bed(result, bed: np.ndarray, source: str):

@@ -251,12 +251,14 @@ class RunSetup:
         return self.navigation == "random_walk" and self.knots is not None
 
     def noise_guess(self) -> dict:
-        """{group: starting noise level} of this run: :func:`initial_noise`, and the walk's
-        intensity (:func:`random_walk_intensity`) when it walks."""
+        """{group: starting noise level} of this run: :func:`initial_noise`, and when it walks the
+        walk's intensity and the vertical velocity's level from the static (ASC) velocities, one
+        correction for both (:func:`random_walk_intensity`, :func:`vertical_velocity_level`)."""
         guess = initial_noise(self.case, self.fit, self.attitude_source == "model")
         if self.random_walk:
-            guess["motion"] = random_walk_intensity(self.case)
-            guess["vertical"] = vertical_velocity_level(self.case)
+            v = asc(self.case).vessel_velocity_m_s
+            guess["motion"] = random_walk_intensity(self.case, v)
+            guess["vertical"] = vertical_velocity_level(self.case, v)
         return guess
 
     def __post_init__(self):
@@ -322,11 +324,18 @@ def ping_knots(case: Case) -> np.ndarray | None:
     return np.asarray(case.pings.time_s, dtype=float).copy()
 
 
-def random_walk_intensity(case: Case) -> float:
+def janus_velocity_variance(case: Case) -> np.ndarray:
+    """(3,) variance of a four-beam velocity (north, east, down axes of the instrument) from the
+    beams' noise (error velocity) through the Janus geometry: sigma^2 diag((B^T B)^-1)."""
+    b = case.instrument.beam_directions()
+    return bt_noise_from_error_velocity(case) ** 2 * np.diag(np.linalg.pinv(b.T @ b))
+
+
+def random_walk_intensity(case: Case, velocity_m_s: np.ndarray) -> float:
     """Starting level of the random-walk prior, sqrt(q) in m/s/sqrt(s), from the data: the per-ping
-    static (ASC) velocities' increments, whose variance is q dt + 2 var(v) with var(v) from the beams'
-    noise (error velocity) through the Janus geometry; horizontal axes, robust (MAD) spread."""
-    v = asc(case).vessel_velocity_m_s[:, :2]
+    static (ASC) velocities' increments (``velocity_m_s``, (N, 3)), whose variance is q dt + 2 var(v)
+    with var(v) from :func:`janus_velocity_variance`; horizontal axes, robust (MAD) spread."""
+    v = velocity_m_s[:, :2]
     t = case.pings.time_s
     ok = np.all(np.isfinite(v), axis=1)
     if ok.sum() < 10:
@@ -334,22 +343,21 @@ def random_walk_intensity(case: Case) -> float:
     dv, dt = np.diff(v[ok], axis=0), np.diff(t[ok])
     z = (dv / np.sqrt(dt)[:, None]).ravel()
     spread2 = (1.4826 * np.median(np.abs(z - np.median(z)))) ** 2
-    b = case.instrument.beam_directions()
-    var_v = bt_noise_from_error_velocity(case) ** 2 * np.mean(np.diag(np.linalg.pinv(b.T @ b))[:2])
+    var_v = float(np.mean(janus_velocity_variance(case)[:2]))
     q = spread2 - 2 * var_v / float(np.median(dt))
     return float(np.sqrt(max(q, 0.01 * spread2, 1e-8)))
 
 
-def vertical_velocity_level(case: Case) -> float:
+def vertical_velocity_level(case: Case, velocity_m_s: np.ndarray) -> float:
     """Starting level of the vertical-velocity prior in m/s: the robust (MAD) spread of the per-ping
-    static (ASC) vertical velocities about zero, less the beams' noise through the Janus geometry."""
-    w = asc(case).vessel_velocity_m_s[:, 2]
+    static (ASC) vertical velocities (``velocity_m_s``, (N, 3)) about zero, less the beams' noise
+    (:func:`janus_velocity_variance`)."""
+    w = velocity_m_s[:, 2]
     w = w[np.isfinite(w)]
     if w.size < 10:
         return 0.02
     spread2 = (1.4826 * np.median(np.abs(w))) ** 2
-    b = case.instrument.beam_directions()
-    var_w = bt_noise_from_error_velocity(case) ** 2 * float(np.linalg.pinv(b.T @ b)[2, 2])
+    var_w = float(janus_velocity_variance(case)[2])
     return float(np.sqrt(max(spread2 - var_w, 0.01 * spread2, 1e-8)))
 
 

@@ -295,6 +295,11 @@ def _covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
     return C
 
 
+def _standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
+    """Standard errors of the unknowns ``index`` in their own units (:func:`_covariance`'s diagonal)."""
+    return np.sqrt(np.maximum(np.diag(_covariance(fit, model, index)), 0)) * fit.scale[index]
+
+
 def _velocity_error(model: GapModel, fit: Fit) -> float | None:
     """RMS horizontal error of the per-ping velocity over ground corrected with the fitted model
     (all runs with a truth)."""
@@ -540,8 +545,7 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, noise, n_obs, conf
     shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
     mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
     idx = [model.names.index(n) for n in mine]
-    se_mine = np.sqrt(np.maximum(np.diag(_covariance(fit, model, idx)), 0)) * fit.scale[idx]
-    se = dict(zip(idx, se_mine))
+    se = dict(zip(idx, _standard_errors(fit, model, idx)))
     colour = _colour_factor(model, fit, ref_model, ref_fit, noise)
     return EffectScore(
         colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
@@ -603,9 +607,9 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     fits = {"base": (base_model, base_fit)}
     skipped, candidates = {}, []
     for name in config.effects:
-        ok, why = applicable(base, name)
         if name in config.given:
             continue
+        ok, why = applicable(base, name)
         if ok:
             candidates.append(name)
         else:
@@ -646,8 +650,9 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
         cv[current_name] = _cv_residuals(*current, config.cv_folds, config.cv_block_s)
         gm, gf = current
         idx = [gm.names.index(n) for n in gm.effect_names]
-        se = np.sqrt(np.maximum(np.diag(_covariance(gf, gm, idx)), 0)) * gf.scale[idx]
-        given = {n: {"value": float(gf.x[i]), "se": float(e)} for n, i, e in zip(gm.effect_names, idx, se)}
+        given = {n: {"value": float(gf.x[i]), "se": float(e)}
+                 for n, i, e in zip(gm.effect_names, idx, _standard_errors(gf, gm, idx))}
+    start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
     walk = base_model.random_walk  # a velocity per ping: coloured-residual BIC, smaller shrink share
 
     def gain(s: EffectScore) -> float:  # the BIC change that decides: coloured-residual on a random-walk base
@@ -682,7 +687,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
             cv["base"] = _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)
             if current_name != "base":
                 cv[current_name] = _cv_residuals(*current, config.cv_folds, config.cv_block_s)
-        ref_gap, ref_z = _gap(current[0], cv[current_name], noise)
+        ref_gap, _ = _gap(current[0], cv[current_name], noise)
         scores = []
         for name, (label, model, f) in tried.items():
             cv[label] = _cv_residuals(model, f, config.cv_folds, config.cv_block_s)
@@ -722,7 +727,6 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
         current_name = tried[best.effect][0]
         current = fits[current_name]
 
-    start_name = "given:" + "+".join(config.given) if config.given else "base"
     start_model, start_fit = fits[start_name]
     gap_before, z_before = _gap(start_model, cv[start_name], noise)
     where = _where(start_model, start_fit, cv[start_name], noise)
