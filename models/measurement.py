@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .doppler import bottom_echo_ratio, radial_from_ratio, receive_time_paper, reported_range, slant_range
+from .doppler import bottom_echo_ratio, radial_from_ratio, ratio_from_radial, receive_time_paper, reported_range, slant_range
 from .kinematics import beam_directions_earth, tangential_velocity_paper_literal, transducer_velocity_earth
 from .rotations import euler_matrix
 
@@ -46,20 +46,80 @@ def bottom_track_function(attitude_fun: ca.Function, timing: str, tangential: st
     ``tangential="paper_literal"`` uses Omega r as printed in Eqs. 31/51 (frames mixed;
     for reproducing the paper only).
     """
+    args = _symbols(attitude_fun)
+    echo = _echo(attitude_fun, timing, tangential, *args)
+    return ca.Function(f"bottom_track_{timing}_{tangential}", list(args), [echo["radial"], echo["range"]],
+                       list(ARGUMENTS), ["radial", "range"])
+
+
+def echo_function(attitude_fun: ca.Function, timing: str, tangential: str = "consistent") -> ca.Function:
+    """The model of :func:`bottom_track_function` with each beam's echo received at a given time:
+    ``echo(t_T, t_R (4,), depth, g_depth, c, v_a, p, r, ypr_st, beam_dirs_t) -> (radial (4,),
+    receive_time (4,), u_tx (4,), u_rx (4,), slant_range (4,))``.
+
+    radial is the measured radial velocity with beam i's echo received at t_R[i] (``shallow``:
+    not received, Eq. 52); receive_time the model's own receive times (t_T for ``shallow``),
+    with which radial is :func:`bottom_track_function`'s; u_tx, u_rx the transducer velocities
+    along the beam at transmit and at t_R; slant_range the distance out to the bottom (Eq. 67).
+    Separating the receive times lets a solver treat them as unknowns (the radial's dependence
+    on the vessel velocity through the travel time is then explicit) and lets the closed form
+    put its own receive times in (:func:`doppler_system_function`).
+    """
+    args = _symbols(attitude_fun)
+    t_R = ca.SX.sym("t_R", 4)
+    echo = _echo(attitude_fun, timing, tangential, *args, receive_at=t_R)
+    names = ["radial", "receive_time", "u_tx", "u_rx", "slant_range"]
+    return ca.Function(f"echo_{timing}_{tangential}", [args[0], t_R, *args[1:]], [echo[k] for k in names],
+                       [ARGUMENTS[0], "t_R", *ARGUMENTS[1:]], names)
+
+
+def doppler_system_function(attitude_fun: ca.Function, timing: str, tangential: str = "consistent") -> ca.Function:
+    """The two-way Doppler equation multiplied out, linear in the vessel velocity (Eq. 89):
+    ``system(t_T, depth, g_depth, c, radial (4,), p, r, ypr_st, beam_dirs_t) -> (A (4, 3), b (4,), t_R (4,))``
+    with rows V_a . (d_R + rho d_T) = (rho - 1) c - (u_R + rho u_T), rho = f / f0 from the
+    measured ``radial`` (Eq. 84) and u_T, u_R the tangential velocities along the beam.
+
+    The echo is received at Eq. 68's time with the measured radial in the reported range
+    (``deep``) or at transmit (``shallow``): what the closed-form correction can know without
+    solving for V_a. A and b come from :func:`echo_function`'s along-beam velocities, so they are
+    the measurement model's at those receive times, not a second derivation of it.
+    """
+    if timing not in ("shallow", "deep"):
+        raise ValueError(f"timing: expected 'shallow' or 'deep' for the closed form, got {timing!r}")
+    t_T, depth, g_depth, c, v_a, p, r, ypr_st, b_t = _symbols(attitude_fun)
+    radial = ca.SX.sym("radial", 4)
+    t_R = ca.SX.sym("t_R", 4)
+    echo = _echo(attitude_fun, timing, tangential, t_T, depth, g_depth, c, v_a, p, r, ypr_st, b_t, receive_at=t_R)
+    rho = ratio_from_radial(radial, c)
+    along = echo["u_rx"] + rho * echo["u_tx"]  # affine in v_a
+    A = ca.jacobian(along, v_a)
+    b = (rho - 1) * c - ca.substitute(along, v_a, ca.SX.zeros(3))
+    if timing == "shallow":
+        at = ca.repmat(t_T, 4, 1)
+    else:
+        at = receive_time_paper(t_T, reported_range(echo["slant_range"], radial, c), c)  # Eq. 68
+    A, b = ca.substitute([A, b], [t_R], [at])
+    return ca.Function(f"doppler_system_{timing}_{tangential}", [t_T, depth, g_depth, c, radial, p, r, ypr_st, b_t],
+                       [A, b, at], ["t_T", "depth", "g_depth", "c", "radial", "p", "r", "ypr_st", "beam_dirs_t"],
+                       ["A", "b", "t_R"])
+
+
+ARGUMENTS = ("t_T", "depth", "g_depth", "c", "v_a", "p", "r", "ypr_st", "beam_dirs_t")
+
+
+def _symbols(attitude_fun: ca.Function):
+    return (ca.SX.sym("t_T"), ca.SX.sym("depth"), ca.SX.sym("g_depth"), ca.SX.sym("c"), ca.SX.sym("v_a", 3),
+            ca.SX.sym("p", attitude_fun.size_in(1)), ca.SX.sym("r", 4, 3), ca.SX.sym("ypr_st", 3),
+            ca.SX.sym("beam_dirs_t", 4, 3))
+
+
+def _echo(attitude_fun, timing, tangential, t_T, depth, g_depth, c, v_a, p, r, ypr_st, b_t, receive_at=None) -> dict:
+    """The model's expressions for one ping (see :func:`bottom_track_function`), each beam's echo
+    received at the model's own time or, given ``receive_at`` (4,), at that time."""
     if timing not in TIMINGS:
         raise ValueError(f"timing: expected one of {list(TIMINGS)}, got {timing!r}")
     if tangential not in TANGENTIALS:
         raise ValueError(f"tangential: expected one of {list(TANGENTIALS)}, got {tangential!r}")
-    t_T = ca.SX.sym("t_T")
-    depth = ca.SX.sym("depth")
-    g_depth = ca.SX.sym("g_depth")
-    c = ca.SX.sym("c")
-    v_a = ca.SX.sym("v_a", 3)
-    p = ca.SX.sym("p", attitude_fun.size_in(1))
-    r = ca.SX.sym("r", 4, 3)
-    ypr_st = ca.SX.sym("ypr_st", 3)
-    b_t = ca.SX.sym("beam_dirs_t", 4, 3)
-
     Lst = euler_matrix(ypr_st[0], ypr_st[1], ypr_st[2])
 
     def state(t):
@@ -72,14 +132,21 @@ def bottom_track_function(attitude_fun: ca.Function, timing: str, tangential: st
         z = g_depth + ca.mtimes(r, Lam[2, :].T)  # depth of each transducer (Eq. 66)
         return d, v, z, Lam
 
+    def received(i, t):
+        d_R, v_R, _, _ = state(t)
+        return ca.dot(v_R[i, :], d_R[i, :])
+
     d_T, v_T, z_T, Lam_T = state(t_T)
     u_tx = ca.sum2(v_T * d_T)
     l_out = slant_range(depth, z_T, d_T[:, 2])  # Eq. 67: transmit point to the bottom spot
     l = reported_range(l_out, u_tx, c)  # the transducer moves along the beam during the flight
+    out = {"u_tx": u_tx, "slant_range": l_out, "receive_time": ca.repmat(t_T, 4, 1)}
     if timing == "shallow":
         radial = u_tx  # Eq. 52 in instrument sign
+        if receive_at is not None:
+            out["u_rx"] = ca.vertcat(*[received(i, receive_at[i]) for i in range(4)])
     else:
-        parts, ranges = [], []
+        parts, ranges, times, u_rxs = [], [], [], []
         for i in range(4):
             t_R = receive_time_paper(t_T, l[i], c)  # Eq. 68
             if timing == "exact":  # positions relative to G(t_T)
@@ -89,16 +156,13 @@ def bottom_track_function(attitude_fun: ca.Function, timing: str, tangential: st
                     back = ca.norm_2(spot - (v_a * (t_R - t_T) + ca.mtimes(Lam_R, r[i, :].T)))
                     t_R = t_T + (l_out[i] + back) / c
                 ranges.append(c * (t_R - t_T) / 2)
-            d_R, v_R, _, _ = state(t_R)
-            u_rx = ca.dot(v_R[i, :], d_R[i, :])
+            times.append(t_R)
+            u_rx = received(i, t_R if receive_at is None else receive_at[i])
+            u_rxs.append(u_rx)
             parts.append(radial_from_ratio(bottom_echo_ratio(u_tx[i], u_rx, c), c))  # Eqs. 70, 65
         radial = ca.vertcat(*parts)
         if timing == "exact":
             l = ca.vertcat(*ranges)
-    return ca.Function(
-        f"bottom_track_{timing}_{tangential}",
-        [t_T, depth, g_depth, c, v_a, p, r, ypr_st, b_t],
-        [radial, l],
-        ["t_T", "depth", "g_depth", "c", "v_a", "p", "r", "ypr_st", "beam_dirs_t"],
-        ["radial", "range"],
-    )
+        out.update(receive_time=ca.vertcat(*times), u_rx=ca.vertcat(*u_rxs))
+    out.update(radial=radial, range=l)
+    return out
