@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 
 from ..cases.case import Case
-from ..models.doppler import ratio_from_radial, receive_time_paper, reported_range, slant_range
+from ..models.doppler import ratio_from_radial, receive_time_paper, slant_range
 from ..models.janus import beam_to_instrument
 from ..models.kinematics import centre_of_rotation_depth
 from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
@@ -73,25 +73,26 @@ def _g_depth(case: Case, r: np.ndarray) -> float:
 
 
 def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangential: str, timing: str = "deep",
-              rows=slice(None)):
-    """A (N, 4, 3) and b (N, 4) of Eq. 89 for every ping (or the pings ``rows``) and beam, and the beam geometry."""
+              rows=slice(None), options=None):
+    """A (N, 4, 3) and b (N, 4) of Eq. 89 for every ping (or the pings ``rows``) and beam, and their
+    four-beam least squares V (N, 3), e (N,) (:func:`~adcpdyn.solvers.rootfinder.closed_form_bottom_track`)."""
+    from ..solvers.rootfinder import closed_form_bottom_track
+
+    return closed_form_bottom_track(**_ping_model(case, attitude, lever_arms_s, ypr_st, rows), timing=timing,
+                                    tangential=tangential, options=options)
+
+
+def _ping_model(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, rows) -> dict:
+    """Arguments of the per-ping solves (:mod:`adcpdyn.solvers.rootfinder`) for the pings ``rows``."""
     t = case.pings.time_s[rows]
-    c = case.instrument.sound_speed_m_s
-    B = case.instrument.beam_directions()
-    Lst = np.asarray(euler_matrix(*ypr_st))
     r = np.asarray(lever_arms_s, dtype=float)
-    d_T, w_T, Lam_T = _beam_state(attitude, t[:, None], Lst, B, r, tangential)
-    u_T = np.sum(w_T * d_T, axis=-1)  # (N, 4)
-    depth = case.environment.depth_at_pings(case.pings.n)[rows][:, None]
-    v_meas = case.pings.bt_radial_m_s[rows]
-    l = reported_range(slant_range(depth, _transducer_depths(case, Lam_T, r), d_T[..., 2]), np.nan_to_num(v_meas), c)
-    t_R = np.broadcast_to(t[:, None], l.shape) if timing == "shallow" else receive_time_paper(t[:, None], l, c)  # Eq. 68
-    d_R, w_R, _ = _beam_state(attitude, t_R, Lst, B, r, tangential, t)
-    u_R = np.sum(w_R * d_R, axis=-1)
-    rho = ratio_from_radial(v_meas, c)
-    A = d_R + rho[..., None] * d_T
-    b = (rho - 1) * c - (u_R + rho * u_T)
-    return {"A": A, "b": b, "d_T": d_T, "d_R": d_R, "u_T": u_T, "u_R": u_R}
+    B = case.instrument.beam_directions()
+    sampled = isinstance(attitude, SampledAttitude)
+    return {"layout": None if sampled else attitude.layout, "attitude_p": np.zeros(0) if sampled else attitude.pack(),
+            "lever_arms_m": r, "ypr_st_rad": ypr_st, "g_depth_m": _g_depth(case, r), "time_s": t,
+            "depth_m": case.environment.depth_at_pings(case.pings.n)[rows], "radial_m_s": case.pings.bt_radial_m_s[rows],
+            "sound_speed_m_s": case.instrument.sound_speed_m_s, "beam_dirs_t": B, "error_row": beam_to_instrument(B)[1],
+            "ping_attitude": attitude.params_at(t) if sampled else None}
 
 
 def _water(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, vessel_velocity, tangential: str, timing: str):
@@ -126,8 +127,9 @@ def _water(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, vessel_ve
     return V.reshape(N, K, 3)
 
 
-def _solve(A, b, beam_dirs_t, beams_allowed):
-    """Least squares per ping with error velocity; exact three-beam fallback."""
+def _solve(A, b, beam_dirs_t, beams_allowed, four_beam=None):
+    """Least squares per ping with error velocity; exact three-beam fallback. ``four_beam``:
+    (V, e) of the pings' four-beam least squares when already solved (:func:`_geometry`)."""
     N = A.shape[0]
     use = np.isfinite(b) & np.asarray(beams_allowed)[None, :]
     n_good = use.sum(axis=1)
@@ -135,9 +137,13 @@ def _solve(A, b, beam_dirs_t, beams_allowed):
     err = np.full(N, np.nan)
     _, e_row = beam_to_instrument(beam_dirs_t)
     full = n_good == 4
-    if full.any():
-        V[full] = np.einsum("nij,nj->ni", np.linalg.pinv(A[full]), b[full])
-        resid = (b[full] - np.einsum("nkj,nj->nk", A[full], V[full])) / 2  # A ~ 2 d: back to radial units
+    if full.any() and four_beam is not None:
+        V[full], err[full] = four_beam[0][full], four_beam[1][full]
+    elif full.any():
+        Af, bf = A[full], b[full]
+        At = Af.transpose(0, 2, 1)
+        V[full] = np.linalg.solve(At @ Af, At @ bf[..., None])[..., 0]  # normal equations: A ~ 2 d, well conditioned
+        resid = (bf - (Af @ V[full][..., None])[..., 0]) / 2  # A ~ 2 d: back to radial units
         err[full] = resid @ e_row
     three = n_good == 3
     if three.any():
@@ -149,26 +155,20 @@ def _solve(A, b, beam_dirs_t, beams_allowed):
 
 def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing: str, options=None):
     """Exact four-beam solve of every complete ping; the closed form's three-beam solution elsewhere."""
-    from ..solvers.rootfinder import NEWTON_RESIDUAL_TOL, error_direction, solve_bottom_track
+    from ..solvers.rootfinder import solve_bottom_track
 
     bt = case.pings.bt_radial_m_s
     n_good = np.isfinite(bt).sum(axis=1)
     N = n_good.size
     V, err = np.full((N, 3), np.nan), np.full(N, np.nan)
-    info = {"rootfinder_fallback_pings": 0, "rootfinder_unconverged_pings": 0}
+    info = {"rootfinder_newton_pings": 0, "rootfinder_fallback_pings": 0, "rootfinder_unconverged_pings": 0}
     B = case.instrument.beam_directions()
     full = np.flatnonzero(n_good == 4)
     if full.size:
-        _, e_row = beam_to_instrument(B)
-        r = np.asarray(lever_arms_s, dtype=float)
-        depth = case.environment.depth_at_pings(N)[full]
-        sampled = isinstance(attitude, SampledAttitude)
-        t_full = case.pings.time_s[full]
-        V[full], err[full], res, info["rootfinder_fallback_pings"] = solve_bottom_track(
-            None if sampled else attitude.layout, np.zeros(0) if sampled else attitude.pack(), r, ypr_st,
-            _g_depth(case, r), t_full, depth, bt[full], case.instrument.sound_speed_m_s, B, error_direction(e_row),
-            timing, options, ping_attitude=attitude.params_at(t_full) if sampled else None)
-        info["rootfinder_unconverged_pings"] = int(np.sum(~(res <= NEWTON_RESIDUAL_TOL)))
+        out = solve_bottom_track(**_ping_model(case, attitude, lever_arms_s, ypr_st, full), timing=timing, options=options)
+        V[full], err[full] = out["V"], out["e"]
+        info.update({f"rootfinder_{k}": out[k] for k in ("newton_pings", "fallback_pings", "unconverged_pings")},
+                    rootfinder_max_residual_m_s=float(np.nanmax(out["residual"])))
     three = np.flatnonzero(n_good == 3)
     if three.size:
         geo = _geometry(case, attitude, lever_arms_s, ypr_st, "consistent", timing, rows=three)
@@ -266,7 +266,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     else:
         geo = _geometry(case, attitude, lever, ypr_st, tangential, timing)
         allowed = [False, True, True, True] if method == "paper_literal" else [True] * 4
-        V, err, n_good = _solve(geo["A"], geo["b"], case.instrument.beam_directions(), allowed)
+        V, err, n_good = _solve(geo["A"], geo["b"], case.instrument.beam_directions(), allowed, (geo["V"], geo["e"]))
         info = {}
     water, relative = None, None
     if case.water is not None:

@@ -1,4 +1,5 @@
-"""Exact per-ping inversion of the bottom-track measurement model for all four beams.
+"""Per-ping inversion of the bottom-track measurement model for all four beams: the closed
+form and the exact root, on all pings at once.
 
 Per ping the unknowns are the vessel velocity V (3) and the error velocity e, and the four
 equations are the measurement model the calibration fits
@@ -12,77 +13,71 @@ at receive, the receive time from the geometry with the transducer moving during
 flight, and the instrument's nonlinear velocity conversion all come from that one model,
 so nothing is linearised or taken from the measured radial.
 
-The solve is one SX expression per ping: a Newton step from V = 0, e = 0, then ``steps``
-chord steps (Newton with that first Jacobian kept: it differs from the Jacobian at the
-solution by O(u/c) ~ 1e-3, so each step gains about three digits at a third of the
-cost of a Newton step), and the final residual; mapped over pings
-on threads and compiled to machine code when the run is long enough to repay the
-compiler (CasADi ``jit``). Pings whose residual stays above tolerance are handed to
-``casadi.rootfinder`` (Newton with a convergence test) on the same residual.
+The closed form (ADC) is the model multiplied out at Eq. 68's receive times
+(:func:`~adcpdyn.models.measurement.doppler_system_function`, Eq. 89, linear in V) solved by
+least squares with the error velocity. It is ~1e-5 m/s from the root: the error velocity's
+direction and the travel time differ from the exact model's at O(u/c).
+
+The exact solve starts there and takes one Newton step on the model with the receive times
+as unknowns too, radial(x, t_R) + e n = v and t_R = T(x) (:func:`~adcpdyn.models.measurement.echo_function`):
+at the closed form's receive times the attitude is already evaluated, and the receive time's
+dependence on V enters by the chain rule, (dradial/dx + dradial/dt_R dT/dx) dx = -residual,
+every derivative generated symbolically from the model's Functions. The step brings a ping
+to ~1e-13 m/s; the exact residual (the attitude at the new receive times) is evaluated at the
+result. Pings above ``NEWTON_TARGET_RESIDUAL`` (deep water: the first step leaves ~1e-10) take
+plain Newton steps on arrays; pings still above ``NEWTON_RESIDUAL_TOL`` go to ``casadi.rootfinder``
+(Newton with a convergence test); pings it leaves above get NaN.
+
+Each per-ping Function is evaluated over all pings by :class:`~adcpdyn.solvers.ping_map.PingFunction`.
 """
 
 from __future__ import annotations
 
 import functools
-import shutil
-import tempfile
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from ..models.measurement import bottom_track_function
+from ..models.measurement import ARGUMENTS, bottom_track_function, doppler_system_function, echo_function
 from ..models.motion import LOCAL_ATTITUDE_SIZE, AttitudeLayout, attitude_function, local_attitude_function
+from ..models.rotations import euler_matrix
+from .ping_map import MapOptions, PingFunction
 
-NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it go to casadi.rootfinder
-CHUNK = 16384  # pings per mapped call (the map is built once per chunk size)
+NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it after the Newton steps go to casadi.rootfinder
+NEWTON_TARGET_RESIDUAL = 1e-11  # m/s; pings above it take another Newton step while steps are left (rounding: ~1e-13)
 N_PING_INPUTS = 6  # t_T, bottom depth, four measured radial velocities
 
 
 @dataclass(frozen=True)
-class RootfinderOptions:
-    """Settings of the exact per-ping solve.
+class RootfinderOptions(MapOptions):
+    """Settings of the exact per-ping solve (and of its evaluation, :class:`~adcpdyn.solvers.ping_map.MapOptions`).
 
     Parameters
     ----------
     steps : int
-        Chord steps after the first Newton step; the error falls about three digits per
-        step from ~1e-3 m/s.
-    threads : int
-        Threads evaluating the mapped solve.
-    compile : str
-        ``auto`` (compile with the system C compiler when there are at least
-        ``compile_min_pings`` pings and a compiler is found), ``always`` or ``never``.
-    compile_min_pings : int
-        Below this the interpreted solve finishes before the compiler would (~5 s).
+        Newton steps at most before ``casadi.rootfinder`` takes the pings left above
+        tolerance: the first from the closed form, the others on the pings it leaves above
+        tolerance. 0: the closed form's pings above tolerance go to ``casadi.rootfinder``.
     """
 
-    steps: int = 2
-    threads: int = 2
-    compile: str = "auto"
-    compile_min_pings: int = 100_000
+    steps: int = 3
 
     def __post_init__(self):
-        if self.compile not in ("auto", "always", "never"):
-            raise ValueError(f"RootfinderOptions.compile: expected 'auto', 'always' or 'never', got {self.compile!r}")
+        super().__post_init__()
         if self.steps < 0:
             raise ValueError(f"RootfinderOptions.steps: expected >= 0, got {self.steps}")
-
-    def compiled(self, n_pings: int) -> bool:
-        if self.compile == "never" or shutil.which("gcc") is None:
-            return False
-        return self.compile == "always" or n_pings >= self.compile_min_pings
 
 
 @dataclass(frozen=True)
 class _Model:
-    """What fixes the per-ping equations besides the shared parameter vector (hashable)."""
+    """What fixes the per-ping equations besides the shared parameter column (hashable)."""
 
     layout: AttitudeLayout | None  # None: the sensor's samples, per-ping attitude data in q
     timing: str
     sound_speed_m_s: float
-    beam_dirs_t: tuple
-    error_direction: tuple
+    error_row: tuple  # e_row . radials = error velocity
+    tangential: str = "consistent"
 
     def n_attitude(self) -> int:
         return 0 if self.layout is None else self.layout.size
@@ -91,59 +86,111 @@ class _Model:
         return N_PING_INPUTS + (LOCAL_ATTITUDE_SIZE if self.layout is None else 0)
 
     def shared_size(self) -> int:
-        return self.n_attitude() + 12 + 3 + 1  # attitude parameters, r (4x3), Lambda_st angles, depth of G
+        return self.n_attitude() + 12 + 12 + 1  # attitude parameters, r (4x3), beams in the sensor frame (4x3), depth of G
+
+    def attitude_function(self) -> ca.Function:
+        return local_attitude_function() if self.layout is None else attitude_function(self.layout)
+
+    def error_direction(self) -> ca.DM:
+        return ca.DM(error_direction(np.asarray(self.error_row)))
+
+    def symbols(self):
+        return ca.SX.sym("q", self.ping_inputs()), ca.SX.sym("s", self.shared_size())
+
+    def arguments(self, q, s) -> dict:
+        """The model's arguments from a ping's column q = [t_T, bottom depth, four radials
+        (, the ping's sampled attitude)] and the shared column s (:func:`shared_parameters`).
+
+        The beams enter already turned into the sensor frame (Lambda_st b_i, shared by every
+        ping) with ypr_st = 0: the same model, without the installation rotation evaluated per ping.
+        """
+        n_att = self.n_attitude()
+        return {"t_T": q[0], "depth": q[1], "radial": q[2:6], "p": q[N_PING_INPUTS:] if self.layout is None else s[:n_att],
+                "r": ca.reshape(s[n_att:n_att + 12], 3, 4).T, "ypr_st": ca.DM.zeros(3),
+                "beam_dirs_t": ca.reshape(s[n_att + 12:n_att + 24], 3, 4).T, "g_depth": s[-1], "c": self.sound_speed_m_s}
 
 
-def shared_parameters(attitude_p: np.ndarray, lever_arms_m: np.ndarray, ypr_st_rad, g_depth_m: float) -> np.ndarray:
-    """The parameter column shared by every ping: [attitude p, r row by row, ypr_st, depth of G]."""
-    return np.concatenate([attitude_p, np.asarray(lever_arms_m, dtype=float).ravel(),
-                           np.asarray(ypr_st_rad, dtype=float), [g_depth_m]])
+def shared_parameters(attitude_p: np.ndarray, lever_arms_m: np.ndarray, ypr_st_rad, beam_dirs_t, g_depth_m: float) -> np.ndarray:
+    """The parameter column shared by every ping: [attitude p, r row by row, Lambda_st b_i row by row, depth of G]."""
+    beams_s = np.asarray(beam_dirs_t, dtype=float) @ np.asarray(euler_matrix(*np.asarray(ypr_st_rad, dtype=float))).T
+    return np.concatenate([attitude_p, np.asarray(lever_arms_m, dtype=float).ravel(), beams_s.ravel(), [g_depth_m]])
+
+
+def _residual_expr(model: _Model, x, q, s):
+    """The measurement model minus the measured radials (4), m/s."""
+    a = model.arguments(q, s)
+    bt = bottom_track_function(model.attitude_function(), model.timing, model.tangential)
+    radial, _ = bt(*_call(a, v_a=x[:3]))
+    return radial + x[3] * model.error_direction() - a["radial"]
+
+
+def _call(a: dict, **more) -> list:
+    """The model Functions' arguments in order (:data:`~adcpdyn.models.measurement.ARGUMENTS`)."""
+    return [{**a, **more}[k] for k in ARGUMENTS]
+
+
+def _closed_form_expr(model: _Model, q, s):
+    """Eq. 89's A (4, 3), b (4,), its receive times and the four-beam least squares x = (V, e)."""
+    a = model.arguments(q, s)
+    system = doppler_system_function(model.attitude_function(), "shallow" if model.timing == "shallow" else "deep",
+                                     model.tangential)
+    A, b, t_R = system(*_call(a, v_a=a["radial"]))  # the closed form takes the measured radials where the model takes V
+    V = ca.solve(ca.mtimes(A.T, A), ca.mtimes(A.T, b))
+    e = ca.dot(b - ca.mtimes(A, V), ca.DM(model.error_row)) / 2  # A ~ 2 d: back to radial units
+    return A, b, t_R, ca.vertcat(V, e)
 
 
 @functools.lru_cache(maxsize=16)
 def _residual(model: _Model) -> ca.Function:
-    """``g(x (4), q, s) -> residual (4)`` in m/s: the measurement model minus the measured radials.
-
-    q = [t_T, bottom depth, four radials] (+ the ping's sampled attitude when ``model.layout`` is None)."""
-    sampled = model.layout is None
-    bt = bottom_track_function(local_attitude_function() if sampled else attitude_function(model.layout), model.timing)
+    """``g(x (4), q, s) -> residual (4)`` in m/s (see :meth:`_Model.arguments` for q and s)."""
     x = ca.SX.sym("x", 4)
-    q = ca.SX.sym("q", model.ping_inputs())
-    s = ca.SX.sym("s", model.shared_size())
-    n_att = model.n_attitude()
-    r = ca.reshape(s[n_att:n_att + 12], 3, 4).T  # row-major (4, 3)
-    p_att = q[N_PING_INPUTS:] if sampled else s[:n_att]
-    radial, _ = bt(q[0], q[1], s[-1], model.sound_speed_m_s, x[:3], p_att, r, s[n_att + 12:n_att + 15],
-                   ca.DM(np.reshape(model.beam_dirs_t, (4, 3))))
-    g = radial + x[3] * ca.DM(model.error_direction) - q[2:6]
-    return ca.Function("bottom_track_residual", [x, q, s], [g], ["x", "q", "s"], ["g"])
+    q, s = model.symbols()
+    return ca.Function("bottom_track_residual", [x, q, s], [_residual_expr(model, x, q, s)], ["x", "q", "s"], ["g"])
 
 
 @functools.lru_cache(maxsize=16)
-def _newton(model: _Model, steps: int, compiled: bool) -> ca.Function:
-    """``solve(q (6), s) -> (x (4), |residual|_inf)``: the chord iteration unrolled into one SX expression."""
-    g = _residual(model)
-    x = ca.SX.sym("x", 4)
-    q = ca.SX.sym("q", model.ping_inputs())
-    s = ca.SX.sym("s", model.shared_size())
-    gj = ca.Function("residual_and_jacobian", [x, q, s], [g(x, q, s), ca.jacobian(g(x, q, s), x)])
-    g0, j0 = gj(ca.SX.zeros(4), q, s)
-    j0_inv = ca.inv(j0)
-    xk = -ca.mtimes(j0_inv, g0)
-    for _ in range(steps):
-        xk = xk - ca.mtimes(j0_inv, g(xk, q, s))
-    outputs = ca.cse([xk, ca.norm_inf(g(xk, q, s))])
-    opts = {}
-    if compiled:
-        opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
-                "jit_options": {"flags": ["-O2"], "verbose": False, "directory": tempfile.gettempdir() + "/"}}
-    return ca.Function("bottom_track_newton", [q, s], outputs, ["q", "s"], ["x", "residual"], opts)
+def _closed_form(model: _Model) -> PingFunction:
+    """``(q, s) -> (A row by row (12,), b (4,), x (4,))``."""
+    q, s = model.symbols()
+    A, b, _, x = _closed_form_expr(model, q, s)
+    return PingFunction(ca.Function("bottom_track_closed_form", [q, s], ca.cse([ca.vec(A.T), b, x]), ["q", "s"],
+                                    ["A", "b", "x"]))
 
 
 @functools.lru_cache(maxsize=16)
-def _mapped(model: _Model, steps: int, compiled: bool, n: int, threads: int) -> ca.Function:
-    f = _newton(model, steps, compiled)
-    return f.map(n, "thread", threads) if threads > 1 else f.map(n)
+def _exact(model: _Model) -> PingFunction:
+    """``(q, s) -> (x (4,), residual (4,))``: the closed form, one Newton step with the receive
+    times as unknowns (module docstring), the exact residual at the result."""
+    q, s = model.symbols()
+    a = model.arguments(q, s)
+    _, _, t_R0, x0 = _closed_form_expr(model, q, s)
+    x, t_R = ca.SX.sym("x", 4), ca.SX.sym("t_R", 4)
+    echo = echo_function(model.attitude_function(), model.timing, model.tangential)
+    args = _call(a, v_a=x[:3])
+    radial, receive_time = echo(args[0], t_R, *args[1:])[:2]
+    g = radial + x[3] * model.error_direction() - a["radial"]
+    linear = ca.Function("linearised", [x, t_R, q, s],
+                         [g, ca.jacobian(g, x), ca.jacobian(g, t_R), receive_time, ca.jacobian(receive_time, x)])
+    g0, g_x, g_t, T0, T_x = linear(x0, t_R0, q, s)
+    x1 = x0 - ca.solve(g_x + ca.mtimes(g_t, T_x), g0 + ca.mtimes(g_t, T0 - t_R0))
+    return PingFunction(ca.Function("bottom_track_exact", [q, s], ca.cse([x1, _residual_expr(model, x1, q, s)]), ["q", "s"],
+                                    ["x", "g"]))
+
+
+@functools.lru_cache(maxsize=16)
+def _newton(model: _Model) -> PingFunction:
+    """``(x, q, s) -> (x - J^-1 g (4,), the residual there (4,))``: a plain Newton step."""
+    x = ca.SX.sym("x", 4)
+    q, s = model.symbols()
+    g = _residual_expr(model, x, q, s)
+    x1 = x - ca.solve(ca.jacobian(g, x), g)
+    return PingFunction(ca.Function("bottom_track_newton", [x, q, s], ca.cse([x1, _residual_expr(model, x1, q, s)]),
+                                    ["x", "q", "s"], ["x_next", "g"]))
+
+
+@functools.lru_cache(maxsize=16)
+def _residual_mapped(model: _Model) -> PingFunction:
+    return PingFunction(_residual(model))
 
 
 @functools.lru_cache(maxsize=16)
@@ -153,46 +200,80 @@ def _fallback(model: _Model, n: int) -> ca.Function:
     return rf.map(n)
 
 
+def _inputs(layout, attitude_p, lever_arms_m, ypr_st_rad, beam_dirs_t, g_depth_m, time_s, depth_m, radial_m_s,
+            ping_attitude):
+    """Per-ping rows q (N, k) and the shared column s."""
+    columns = [np.asarray(time_s, dtype=float)[:, None], np.asarray(depth_m, dtype=float)[:, None],
+               np.asarray(radial_m_s, dtype=float)]
+    if layout is None:
+        columns.append(np.asarray(ping_attitude, dtype=float).T)
+    return np.hstack(columns), shared_parameters(np.asarray(attitude_p, dtype=float), lever_arms_m, ypr_st_rad,
+                                                  beam_dirs_t, g_depth_m)
+
+
+def closed_form_bottom_track(layout: AttitudeLayout | None, attitude_p, lever_arms_m, ypr_st_rad, g_depth_m: float,
+                             time_s, depth_m, radial_m_s, sound_speed_m_s: float, beam_dirs_t, error_row,
+                             timing: str = "deep", tangential: str = "consistent", options: MapOptions | None = None,
+                             ping_attitude=None) -> dict:
+    """Eq. 89 for every ping: A (N, 4, 3), b (N, 4) and the four-beam least squares V (N, 3),
+    e (N,) (NaN where a radial is missing; its beam's row of A and b is NaN too).
+
+    Arguments as :func:`solve_bottom_track`; ``timing`` ``exact`` is taken as ``deep`` (Eq. 68's
+    receive time), ``tangential`` ``paper_literal`` takes Omega r for the tangential velocity.
+    """
+    model = _Model(layout, "shallow" if timing == "shallow" else "deep", float(sound_speed_m_s),
+                   tuple(np.asarray(error_row, dtype=float).ravel()), tangential)
+    q, s = _inputs(layout, attitude_p, lever_arms_m, ypr_st_rad, beam_dirs_t, g_depth_m, time_s, depth_m, radial_m_s,
+                   ping_attitude)
+    A, b, x = _closed_form(model)(q, s, options=options)
+    return {"A": A.reshape(-1, 4, 3), "b": b, "V": x[:, :3], "e": x[:, 3]}
+
+
 def solve_bottom_track(layout: AttitudeLayout | None, attitude_p, lever_arms_m, ypr_st_rad, g_depth_m: float,
-                       time_s, depth_m, radial_m_s, sound_speed_m_s: float, beam_dirs_t, error_direction,
-                       timing: str = "deep", options: RootfinderOptions | None = None, ping_attitude=None):
-    """Vessel velocity (N, 3), error velocity (N,), final residual (N,) and how many pings went to
-    ``casadi.rootfinder``, for pings with four beams.
+                       time_s, depth_m, radial_m_s, sound_speed_m_s: float, beam_dirs_t, error_row,
+                       timing: str = "deep", options: RootfinderOptions | None = None, ping_attitude=None) -> dict:
+    """The exact root for pings with four beams: vessel velocity V (N, 3), error velocity e (N,),
+    the final residual (N,) and how the pings converged.
 
     ``attitude_p`` packs the attitude model of the sensor frame (``layout`` None: the sensor's
     samples instead, ``ping_attitude`` (8, N) from :meth:`~adcpdyn.models.motion.SampledAttitude.params_at`
-    at the ping times, ``attitude_p`` empty), ``lever_arms_m`` (4, 3)
-    are in that frame and ``ypr_st_rad`` turns the transducer frame into it; ``g_depth_m``
-    is the depth of the centre of rotation. Pings whose residual stays above
-    ``NEWTON_RESIDUAL_TOL`` after ``casadi.rootfinder`` get NaN (their residual says why).
+    at the ping times, ``attitude_p`` empty), ``lever_arms_m`` (4, 3) are in that frame and
+    ``ypr_st_rad`` turns the transducer frame into it; ``g_depth_m`` is the depth of the centre
+    of rotation; ``error_row`` (4,) gives the error velocity from the four radials.
+
+    Returned counts: ``newton_pings`` that took more than the first Newton step,
+    ``fallback_pings`` handed to ``casadi.rootfinder`` and ``unconverged_pings`` whose residual
+    stayed above ``NEWTON_RESIDUAL_TOL`` (their V and e are NaN, their residual says by how much).
     """
     options = options or RootfinderOptions()
-    model = _Model(layout, timing, float(sound_speed_m_s), tuple(np.asarray(beam_dirs_t, dtype=float).ravel()),
-                   tuple(np.asarray(error_direction, dtype=float).ravel()))
-    q = np.vstack([np.asarray(time_s, dtype=float), np.asarray(depth_m, dtype=float),
-                   np.asarray(radial_m_s, dtype=float).T] + ([] if layout is not None else [np.asarray(ping_attitude, dtype=float)]))
-    s = shared_parameters(np.asarray(attitude_p, dtype=float), lever_arms_m, ypr_st_rad, g_depth_m)
-    n = q.shape[1]
-    size = min(n, CHUNK)
-    solve = _mapped(model, options.steps, options.compiled(n), size, options.threads)
-    x = np.empty((4, n))
-    res = np.empty(n)
-    for start in range(0, n, size):
-        block = q[:, start:start + size]
-        m = block.shape[1]
-        padded = np.pad(block, ((0, 0), (0, size - m)), mode="edge")
-        xb, rb = solve(padded, s)
-        x[:, start:start + m] = np.asarray(xb)[:, :m]
-        res[start:start + m] = np.asarray(rb).ravel()[:m]
-    slow = np.flatnonzero(~(res <= NEWTON_RESIDUAL_TOL))  # not converged in the fixed steps (or NaN)
-    if slow.size:
-        x0 = np.nan_to_num(x[:, slow])
-        x[:, slow] = np.asarray(_fallback(model, slow.size)(x0, q[:, slow], s))
-        g = _residual(model).map(slow.size)(x[:, slow], q[:, slow], s)
-        res[slow] = np.max(np.abs(np.asarray(g)), axis=0)
-        bad = slow[~(res[slow] <= NEWTON_RESIDUAL_TOL)]
-        x[:, bad] = np.nan
-    return x[:3].T, x[3], res, int(slow.size)
+    model = _Model(layout, timing, float(sound_speed_m_s), tuple(np.asarray(error_row, dtype=float).ravel()))
+    q, s = _inputs(layout, attitude_p, lever_arms_m, ypr_st_rad, beam_dirs_t, g_depth_m, time_s, depth_m, radial_m_s,
+                   ping_attitude)
+    norm = lambda g: np.max(np.abs(g), axis=1)  # NaN stays NaN (CasADi's norm_inf would drop it)
+    if options.steps == 0:
+        x = _closed_form(model)(q, s, options=options)[2]
+        res = norm(_residual_mapped(model)(x, q, s, options=options)[0])
+    else:
+        x, g = _exact(model)(q, s, options=options)
+        res = norm(g)
+    above = lambda r, tol: ~(r <= tol)  # NaN counts as above
+    more = np.flatnonzero(above(res, NEWTON_TARGET_RESIDUAL)) if options.steps > 1 else np.zeros(0, dtype=int)
+    todo = more
+    for _ in range(options.steps - 1):
+        if not todo.size:
+            break
+        x[todo], g = _newton(model)(x[todo], q[todo], s, options=options)
+        res[todo] = norm(g)
+        todo = todo[above(res[todo], NEWTON_TARGET_RESIDUAL)]
+    todo = np.flatnonzero(above(res, NEWTON_RESIDUAL_TOL))
+    if todo.size:
+        x0 = np.nan_to_num(x[todo]).T
+        x[todo] = np.asarray(_fallback(model, todo.size)(x0, q[todo].T, s)).T
+        res[todo] = norm(_residual_mapped(model)(x[todo], q[todo], s, options=options)[0])
+    bad = above(res, NEWTON_RESIDUAL_TOL)
+    x[bad] = np.nan
+    return {"V": x[:, :3], "e": x[:, 3], "residual": res, "newton_pings": int(more.size),
+            "fallback_pings": int(todo.size), "unconverged_pings": int(bad.sum())}
 
 
 def error_direction(e_row: np.ndarray) -> np.ndarray:

@@ -1,0 +1,117 @@
+"""A per-ping CasADi Function evaluated over many pings at once.
+
+The Function takes one column per ping for each per-ping input and one parameter column
+shared by every ping. It is mapped over blocks of pings (each map built once per block
+size) and evaluated through CasADi's buffer interface straight from and into numpy arrays:
+the DM round trip of an ordinary call costs more than the evaluation itself for the small
+per-ping models here. When the run is long enough to repay the compiler, the Function is
+compiled to machine code once per process (CasADi ``jit`` with the system C compiler, its
+files in the temporary folder).
+"""
+
+from __future__ import annotations
+
+import functools
+import shutil
+import tempfile
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+CHUNK = 16384  # pings per mapped evaluation
+
+
+@dataclass(frozen=True)
+class MapOptions:
+    """How a per-ping Function is evaluated over the pings.
+
+    Parameters
+    ----------
+    threads : int
+        Threads sharing each block of pings (CasADi ``thread`` map).
+    compile : str
+        ``auto`` (compile with the system C compiler when there are at least
+        ``compile_min_pings`` pings and a compiler is found), ``always`` or ``never``.
+    compile_min_pings : int
+        Below this the interpreted evaluation finishes before the compiler would.
+    """
+
+    threads: int = 2
+    compile: str = "auto"
+    compile_min_pings: int = 100_000
+
+    def __post_init__(self):
+        if self.compile not in ("auto", "always", "never"):
+            raise ValueError(f"{type(self).__name__}.compile: expected 'auto', 'always' or 'never', got {self.compile!r}")
+        if self.threads < 1:
+            raise ValueError(f"{type(self).__name__}.threads: expected >= 1, got {self.threads}")
+
+    def compiled(self, n_pings: int) -> bool:
+        if self.compile == "never" or shutil.which("gcc") is None:
+            return False
+        return self.compile == "always" or n_pings >= self.compile_min_pings
+
+
+class PingFunction:
+    """``f(per-ping inputs..., shared) -> outputs``, every input and output a column vector.
+
+    Call it with one (N, k) array per per-ping input (row n: ping n) and the shared column;
+    it returns one (N, k_out) array per output.
+    """
+
+    def __init__(self, fun: ca.Function):
+        if any(fun.size2_in(i) != 1 for i in range(fun.n_in())) or any(fun.size2_out(i) != 1 for i in range(fun.n_out())):
+            raise ValueError(f"{fun.name()}: inputs and outputs must be column vectors")
+        self.fun = fun
+        self._maps = {}
+
+    @functools.cached_property
+    def _compiled(self) -> ca.Function:
+        opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
+                "jit_options": {"flags": ["-O2"], "verbose": False, "directory": tempfile.gettempdir() + "/"}}
+        f = self.fun
+        return ca.Function(f.name() + "_compiled", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(), opts)
+
+    def _mapped(self, size: int, compiled: bool, threads: int) -> ca.Function:
+        key = (size, compiled, threads)
+        if key not in self._maps:
+            f = self._compiled if compiled else self.fun
+            shared = [f.n_in() - 1]
+            if threads > 1:  # `threads` blocks of size / threads pings, each shared column repeated per block
+                self._maps[key] = f.map("block", "serial", size // threads, shared, []).map(threads, "thread", threads)
+            else:
+                self._maps[key] = f.map("block", "serial", size, shared, [])
+        return self._maps[key]
+
+    def __call__(self, *args, options: MapOptions | None = None) -> list[np.ndarray]:
+        options = options or MapOptions()
+        *per_ping, shared = args
+        per_ping = [np.ascontiguousarray(a, dtype=float).reshape(a.shape[0], -1) for a in per_ping]
+        n = per_ping[0].shape[0]
+        outputs = [np.empty((n, self.fun.nnz_out(i))) for i in range(self.fun.n_out())]
+        if n == 0:
+            return outputs
+        threads = max(1, min(options.threads, n))
+        size = min(CHUNK, n)
+        size = -(-size // threads) * threads  # a multiple of the threads
+        f = self._mapped(size, options.compiled(n), threads)
+        shared = np.ascontiguousarray(np.tile(np.asarray(shared, dtype=float).ravel(), threads))
+        for start in range(0, n, size):
+            stop = min(start + size, n)
+            ins = [a[start:stop] for a in per_ping]
+            outs = [o[start:stop] for o in outputs]
+            if stop - start < size:  # the last block, padded with its last ping
+                ins = [np.concatenate([a, np.repeat(a[-1:], size - a.shape[0], axis=0)]) for a in ins]
+                outs = [np.empty((size, o.shape[1])) for o in outs]
+            buffer, evaluate = f.buffer()
+            for i, a in enumerate(ins):
+                buffer.set_arg(i, memoryview(a))
+            buffer.set_arg(len(ins), memoryview(shared))
+            for i, o in enumerate(outs):
+                buffer.set_res(i, memoryview(o))
+            evaluate()
+            if stop - start < size:
+                for o, block in zip(outputs, outs):
+                    o[start:stop] = block[:stop - start]
+        return outputs
