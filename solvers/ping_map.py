@@ -54,16 +54,18 @@ class MapOptions:
 
 
 class PingFunction:
-    """``f(per-ping inputs..., shared) -> outputs``, every input and output a column vector.
+    """``f(per-ping inputs..., shared) -> outputs``: an SX Function whose inputs and outputs are
+    column vectors, the last input shared by every ping.
 
     Call it with one (N, k) array per per-ping input (row n: ping n) and the shared column;
-    it returns one (N, k_out) array per output.
+    it returns one (N, k_out) array per output (outputs made dense).
     """
 
     def __init__(self, fun: ca.Function):
         if any(fun.size2_in(i) != 1 for i in range(fun.n_in())) or any(fun.size2_out(i) != 1 for i in range(fun.n_out())):
             raise ValueError(f"{fun.name()}: inputs and outputs must be column vectors")
-        self.fun = fun
+        ins = fun.sx_in()
+        self.fun = ca.Function(fun.name(), ins, [ca.densify(o) for o in fun.call(ins)], fun.name_in(), fun.name_out())
         self._maps = {}
 
     @functools.cached_property
