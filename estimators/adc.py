@@ -165,8 +165,9 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
     B = case.instrument.beam_directions()
     full = np.flatnonzero(n_good == 4)
     if full.size:
-        out = solve_bottom_track(**_ping_model(case, attitude, lever_arms_s, ypr_st, full), timing=timing, options=options)
-        V[full], err[full] = out["V"], out["e"]
+        rows = slice(None) if full.size == N else full  # views, not copies, when every ping has four beams
+        out = solve_bottom_track(**_ping_model(case, attitude, lever_arms_s, ypr_st, rows), timing=timing, options=options)
+        V[rows], err[rows] = out["V"], out["e"]
         info.update({f"rootfinder_{k}": out[k] for k in ("newton_pings", "fallback_pings", "unconverged_pings")},
                     rootfinder_max_residual_m_s=float(np.nanmax(out["residual"])))
     three = np.flatnonzero(n_good == 3)

@@ -18,17 +18,22 @@ The closed form (ADC) is the model multiplied out at Eq. 68's receive times
 least squares with the error velocity. It is ~1e-5 m/s from the root: the error velocity's
 direction and the travel time differ from the exact model's at O(u/c).
 
-The exact solve starts there and takes one Newton step on the model with the receive times
-as unknowns too, radial(x, t_R) + e n = v and t_R = T(x) (:func:`~adcpdyn.models.measurement.echo_function`):
-at the closed form's receive times the attitude is already evaluated, and the receive time's
-dependence on V enters by the chain rule, (dradial/dx + dradial/dt_R dT/dx) dx = -residual,
-every derivative generated symbolically from the model's Functions. The step brings a ping
-to ~1e-13 m/s; the exact residual (the attitude at the new receive times) is evaluated at the
-result. Pings above ``NEWTON_TARGET_RESIDUAL`` (deep water: the first step leaves ~1e-10) take
+The exact solve starts there, x0 and the closed form's receive times t0, and takes one
+Newton step on the model with the receive times as unknowns too: g(x, t_R) = radial(x, t_R)
++ e n - v = 0 and t_R = T(x), the model's own receive times
+(:func:`~adcpdyn.models.measurement.echo_function`). At t0 the attitude is already evaluated;
+eliminating the receive times leaves (g_x + g_t T_x) dx = -(g + g_t (T(x0) - t0)) (g_t
+diagonal: beam i's echo depends on its own receive time), every derivative generated
+symbolically from the model's Functions. The step brings a ping to ~1e-13 m/s; the exact
+residual (the attitude at the new receive times T(x1)) is evaluated at the result. Pings above ``NEWTON_TARGET_RESIDUAL`` (deep water: the first step leaves ~1e-10) take
 plain Newton steps on arrays; pings still above ``NEWTON_RESIDUAL_TOL`` go to ``casadi.rootfinder``
 (Newton with a convergence test); pings it leaves above get NaN.
 
-Each per-ping Function is evaluated over all pings by :class:`~adcpdyn.solvers.ping_map.PingFunction`.
+Each per-ping Function is evaluated over all pings by :class:`~adcpdyn.solvers.ping_map.PingFunction`;
+the beams enter already turned into the sensor frame (shared by every ping), so no ping
+evaluates the installation rotation. Per ping the exact solve evaluates the attitude nine
+times (transmit, the closed form's four receive times, the result's four): its sines,
+cosines and exponentials are most of its cost.
 """
 
 from __future__ import annotations
@@ -145,7 +150,7 @@ def _residual(model: _Model) -> ca.Function:
     """``g(x (4), q, s) -> residual (4)`` in m/s (see :meth:`_Model.arguments` for q and s)."""
     x = ca.SX.sym("x", 4)
     q, s = model.symbols()
-    return ca.Function("bottom_track_residual", [x, q, s], [_residual_expr(model, x, q, s)], ["x", "q", "s"], ["g"])
+    return ca.Function("bottom_track_residual", [x, q, s], [ca.cse(_residual_expr(model, x, q, s))], ["x", "q", "s"], ["g"])
 
 
 @functools.lru_cache(maxsize=16)
