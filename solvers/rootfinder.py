@@ -24,10 +24,13 @@ Newton step on the model with the receive times as unknowns too: g(x, t_R) = rad
 (:func:`~adcpdyn.models.measurement.echo_function`). At t0 the attitude is already evaluated;
 eliminating the receive times leaves (g_x + g_t T_x) dx = -(g + g_t (T(x0) - t0)) (g_t
 diagonal: beam i's echo depends on its own receive time), every derivative generated
-symbolically from the model's Functions. The step brings a ping to ~1e-13 m/s; the exact
-residual (the attitude at the new receive times T(x1)) is evaluated at the result. Pings above ``NEWTON_TARGET_RESIDUAL`` (deep water: the first step leaves ~1e-10) take
-plain Newton steps on arrays; pings still above ``NEWTON_RESIDUAL_TOL`` go to ``casadi.rootfinder``
-(Newton with a convergence test); pings it leaves above get NaN.
+symbolically from the model's Functions; the exact residual (the attitude at the new
+receive times T(x1)) is evaluated at the result. The step leaves ~1e-13 m/s in shallow
+water; its error grows as the square of t0 - T(x), the closed form's receive times being
+~2e-5 s off in 300 m of water, where it leaves up to ~2e-10 m/s. Pings above
+``NEWTON_TARGET_RESIDUAL`` take Newton steps on arrays (the same formula at t0 = T(x): Newton's
+step with its exact Jacobian); pings still above ``NEWTON_RESIDUAL_TOL`` go to
+``casadi.rootfinder`` (Newton with a convergence test); pings it leaves above get NaN.
 
 Each per-ping Function is evaluated over all pings by :class:`~adcpdyn.solvers.ping_map.PingFunction`;
 the beams enter already turned into the sensor frame (shared by every ping), so no ping
@@ -50,7 +53,7 @@ from ..models.rotations import euler_matrix
 from .ping_map import MapOptions, PingFunction
 
 NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it after the Newton steps go to casadi.rootfinder
-NEWTON_TARGET_RESIDUAL = 1e-11  # m/s; pings above it take another Newton step while steps are left (rounding: ~1e-13)
+NEWTON_TARGET_RESIDUAL = 1e-10  # m/s; pings above it take another Newton step while steps are left (rounding: ~1e-13)
 N_PING_INPUTS = 6  # t_T, bottom depth, four measured radial velocities
 
 
@@ -162,33 +165,46 @@ def _closed_form(model: _Model) -> PingFunction:
                                     ["A", "b", "x"]))
 
 
-@functools.lru_cache(maxsize=16)
-def _exact(model: _Model) -> PingFunction:
-    """``(q, s) -> (x (4,), residual (4,))``: the closed form, one Newton step with the receive
-    times as unknowns (module docstring), the exact residual at the result."""
+def _linearised(model: _Model) -> ca.Function:
+    """``(x, t_R, q, s) -> (g, dg/dx, dg/dt_R (diagonal), T, dT/dx)``: the residual with the echoes
+    received at t_R and the model's own receive times T(x) (:func:`~adcpdyn.models.measurement.echo_function`)."""
+    x, t_R = ca.SX.sym("x", 4), ca.SX.sym("t_R", 4)
     q, s = model.symbols()
     a = model.arguments(q, s)
-    _, _, t_R0, x0 = _closed_form_expr(model, q, s)
-    x, t_R = ca.SX.sym("x", 4), ca.SX.sym("t_R", 4)
-    echo = echo_function(model.attitude_function(), model.timing, model.tangential)
     args = _call(a, v_a=x[:3])
+    echo = echo_function(model.attitude_function(), model.timing, model.tangential)
     radial, receive_time = echo(args[0], t_R, *args[1:])[:2]
     g = radial + x[3] * model.error_direction() - a["radial"]
-    linear = ca.Function("linearised", [x, t_R, q, s],
-                         [g, ca.jacobian(g, x), ca.jacobian(g, t_R), receive_time, ca.jacobian(receive_time, x)])
-    g0, g_x, g_t, T0, T_x = linear(x0, t_R0, q, s)
-    x1 = x0 - ca.solve(g_x + ca.mtimes(g_t, T_x), g0 + ca.mtimes(g_t, T0 - t_R0))
+    return ca.Function("linearised", [x, t_R, q, s],
+                       [g, ca.jacobian(g, x), ca.jacobian(g, t_R), receive_time, ca.jacobian(receive_time, x)])
+
+
+def _newton_step(model: _Model, x0, t0, q, s):
+    """The Newton step of g(x, t_R) = 0, t_R = T(x) from (x0, t0), the receive times eliminated:
+    x0 - (g_x + g_t T_x)^-1 (g + g_t (T(x0) - t0)). With t0 = T(x0) it is Newton's step on the
+    residual with its exact Jacobian, the receive times' dependence on x by the chain rule."""
+    g, g_x, g_t, T, T_x = _linearised(model)(x0, t0, q, s)
+    return x0 - ca.solve(g_x + ca.mtimes(g_t, T_x), g + ca.mtimes(g_t, T - t0))
+
+
+@functools.lru_cache(maxsize=16)
+def _exact(model: _Model) -> PingFunction:
+    """``(q, s) -> (x (4,), residual (4,))``: the closed form, one Newton step from it with its
+    receive times (module docstring), the exact residual at the result."""
+    q, s = model.symbols()
+    _, _, t0, x0 = _closed_form_expr(model, q, s)
+    x1 = _newton_step(model, x0, t0, q, s)
     return PingFunction(ca.Function("bottom_track_exact", [q, s], ca.cse([x1, _residual_expr(model, x1, q, s)]), ["q", "s"],
                                     ["x", "g"]))
 
 
 @functools.lru_cache(maxsize=16)
 def _newton(model: _Model) -> PingFunction:
-    """``(x, q, s) -> (x - J^-1 g (4,), the residual there (4,))``: a plain Newton step."""
+    """``(x, q, s) -> (x - J^-1 g (4,), the residual there (4,))``: Newton's step."""
     x = ca.SX.sym("x", 4)
     q, s = model.symbols()
-    g = _residual_expr(model, x, q, s)
-    x1 = x - ca.solve(ca.jacobian(g, x), g)
+    T = _linearised(model)(x, ca.SX.zeros(4), q, s)[3]  # the model's receive times do not depend on t_R
+    x1 = _newton_step(model, x, T, q, s)
     return PingFunction(ca.Function("bottom_track_newton", [x, q, s], ca.cse([x1, _residual_expr(model, x1, q, s)]),
                                     ["x", "q", "s"], ["x_next", "g"]))
 
