@@ -10,8 +10,10 @@ misses, which catalog effects explain it, and how far the held-out gap shrinks.
    flexible pre-fit, bottom track from the four-beam error velocity), otherwise the lowest
    residual level any fitted model reached.
 3. Forward selection: every applicable catalog effect is refitted on top of the current model
-   (warm start); the best significant one (BIC better by ``bic_margin`` and at least
-   ``min_shrink`` of the held-out gap removed) joins the model, and the next round tries the rest.
+   (warm start); of the significant ones (BIC better by ``bic_margin`` and at least
+   ``min_shrink`` of the held-out gap removed) the one that shrinks the held-out gap most joins
+   the model (:func:`preference`: one that contains another as a special case only when its
+   extra unknowns are significant), and the next round tries the rest.
    Shared effects (compass, beam angles, sound speed, latency, lever arms, installation) act on
    every run; per-run ones (moving bed, heave, forced roll) on each run separately.
 4. Confounding: an effect whose parameters share most of their variance with a base unknown (or
@@ -702,7 +704,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
                 s.significant = bool(gain(s) < -config.bic_margin and s.shrink_fraction >= config.min_shrink
                                      and ref_gap > config.min_gap)
             scores.append(s)
-        scores.sort(key=lambda s: (not s.significant, gain(s)))
+        scores = preference(scores, gain, config.bic_margin)
         ranking += scores
         if round_ == 1:
             first_gain = {sc.effect: gain(sc) for sc in scores}
@@ -801,6 +803,24 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
         confounded=confounded,
         alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
+
+
+def preference(scores: list, gain, bic_margin: float) -> list:
+    """The scores in order of preference: the significant ones first, the one that predicts the
+    held-out data best (largest shrink) ahead, since two effects the BIC both accepts are told apart
+    by what they predict, not by in-sample fit under residuals whose colour is only estimated;
+    an effect that contains a significant other as a special case (``Effect.nests``) goes behind
+    it unless its extra unknowns are significant themselves (BIC better than the other's by
+    ``bic_margin``). The rest follow by BIC gain."""
+    significant = sorted((s for s in scores if s.significant), key=lambda s: -s.shrink_fraction)
+    for big in list(significant):
+        for name in get_effect(big.effect).nests:
+            small = next((s for s in significant if s.effect == name), None)
+            if small is not None and gain(big) - gain(small) > -bic_margin:
+                i, j = significant.index(big), significant.index(small)
+                if j > i:
+                    significant.insert(i, significant.pop(j))
+    return significant + sorted((s for s in scores if not s.significant), key=gain)
 
 
 LATENCY_ITERATIONS = 3
