@@ -411,7 +411,8 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
 
 # ----------------------------------------------------------------------------------------------- correct
 def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep", reference: str = "bt",
-            out=None, history: str | None = None, accept_other_instrument: bool = False) -> "Correction":
+            out=None, history: str | None = None, accept_other_instrument: bool = False,
+            attribution=None) -> "Correction":
     """Correct every ping of a case: vessel velocity (bottom track) and water profile.
 
     Parameters
@@ -432,6 +433,8 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         What produced it (the netCDF ``history`` attribute).
     accept_other_instrument : bool
         Apply a calibration whose CALIB.json names another instrument (refused by default).
+    attribution : str, os.PathLike or Attribution, optional
+        With ``out=OUT.nc``: who made and distributes the data (:func:`to_xarray`).
 
     Returns
     -------
@@ -452,6 +455,11 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     _choice("method", method, CORRECTION_METHODS)
     _choice("timing", timing, TIMINGS)
     _choice("reference", reference, REFERENCES)
+    if attribution is not None and (out is None or Path(out).suffix.lower() != ".nc"):
+        raise ValueError(f"attribution: only with out=OUT.nc (netCDF), got out={None if out is None else str(out)!r}")
+    from .cases.attribution import as_attribution
+
+    attribution = as_attribution(attribution)  # a bad file fails before the work
     if out is not None:
         from .cases.atomic import check_output_file
 
@@ -469,11 +477,11 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     result.attrs.update(source_case_name=c.name, source_case_file=src.path,
                         source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
     if out is not None:
-        _write_correction(dataclasses.replace(src, case=c), result, out, calibration, history)
+        _write_correction(dataclasses.replace(src, case=c), result, out, calibration, history, attribution)
     return result
 
 
-def _write_correction(src: _Source, result, out, calibration, history) -> None:
+def _write_correction(src: _Source, result, out, calibration, history, attribution=None) -> None:
     if Path(out).suffix.lower() != ".nc":
         from .cases.corrected import write_correction
 
@@ -482,7 +490,8 @@ def _write_correction(src: _Source, result, out, calibration, history) -> None:
     from .cases.netcdf import to_xarray as _to_xarray
     from .cases.netcdf import write_netcdf
 
-    ds = _to_xarray(src.case, result, provenance=src.provenance, source_case_path=src.path, history=history)
+    ds = _to_xarray(src.case, result, provenance=src.provenance, source_case_path=src.path, history=history,
+                    attribution=attribution)
     inputs = [p for p in (src.path, calibration) if isinstance(p, (str, os.PathLike))]
     write_netcdf(ds, out, *inputs)
 
@@ -700,7 +709,8 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
 
 
 # ----------------------------------------------------------------------------------------------- export
-def to_xarray(case, correction: "Correction | None" = None, *, history: str | None = None) -> "xarray.Dataset":
+def to_xarray(case, correction: "Correction | None" = None, *, history: str | None = None,
+              attribution=None) -> "xarray.Dataset":
     """A case, and optionally a correction of it, as a CF-1.8 :class:`xarray.Dataset`.
 
     Parameters
@@ -710,14 +720,19 @@ def to_xarray(case, correction: "Correction | None" = None, *, history: str | No
         The result of :func:`correct` on this case.
     history : str, optional
         What produced it, for the ``history`` attribute.
+    attribution : str, os.PathLike or Attribution, optional
+        Who made and distributes the data: creator, publisher, institution, licence, naming
+        authority (ACDD-1.3, IOOS-1.2), as a TOML file of those attributes or an
+        :class:`~adcpdyn.cases.attribution.Attribution`; ``not stated`` without it.
 
     Returns
     -------
     xarray.Dataset
-        ENU velocities, UTC ``time`` (when the case has a UTC origin), dims ``time``,
-        ``depth``, ``beam``; provenance attributes (adcpdyn version, source case and
-        instrument file with SHA-256, method, calibration file, heading misalignment,
-        declination, moving bed).
+        ENU velocities, UTC ``time`` (when the case has a UTC origin; else the pings'
+        coordinate is ``case_time``), dims ``beam``, ``time``, ``depth``; CF trajectoryProfile
+        with positions and dates, ACDD-1.3 and IOOS-1.2 attributes; provenance attributes
+        (adcpdyn version, source case and instrument file by absolute path with SHA-256,
+        method, calibration file, heading misalignment, declination, moving bed).
 
     Raises
     ------
@@ -731,10 +746,12 @@ def to_xarray(case, correction: "Correction | None" = None, *, history: str | No
         from .cases.coverage import restrict_to_coverage
 
         src = dataclasses.replace(src, case=restrict_to_coverage(src.case, source=src.path or src.case.name)[0])
-    return _to_xarray(src.case, correction, provenance=src.provenance, source_case_path=src.path, history=history)
+    return _to_xarray(src.case, correction, provenance=src.provenance, source_case_path=src.path, history=history,
+                      attribution=attribution)
 
 
-def export(case, out, correction: "Correction | None" = None, *, history: str | None = None) -> Path:
+def export(case, out, correction: "Correction | None" = None, *, history: str | None = None,
+           attribution=None) -> Path:
     """Write a case (and optionally a correction of it) as CF-1.8 netCDF (h5netcdf engine).
 
     Parameters
@@ -744,6 +761,8 @@ def export(case, out, correction: "Correction | None" = None, *, history: str | 
         ``OUT.nc``, written atomically with the permissions of the process umask; never an input.
     correction : Correction, optional
     history : str, optional
+    attribution : str, os.PathLike or Attribution, optional
+        Who made and distributes the data (:func:`to_xarray`).
 
     Returns
     -------
@@ -762,6 +781,6 @@ def export(case, out, correction: "Correction | None" = None, *, history: str | 
         raise ValueError(f"out: expected a netCDF file name ending in .nc, got {str(out)!r}")
     inputs = [case] if isinstance(case, (str, os.PathLike)) else []
     check_output_file(out, *inputs, option="out")
-    ds = to_xarray(case, correction, history=history or "adcpdyn.export")
+    ds = to_xarray(case, correction, history=history or "adcpdyn.export", attribution=attribution)
     write_netcdf(ds, out, *inputs)
     return Path(out)

@@ -264,6 +264,8 @@ def cmd_correct(args) -> int:
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
 
+    if args.attribution and (is_many(args.case) or Path(args.out).suffix.lower() != ".nc"):
+        raise ValueError(f"--attribution: only with one case and --out OUT.nc (netCDF), got --out {args.out}")
     if is_many(args.case):
         from .batch import CorrectJob, check_scheduler
 
@@ -282,9 +284,11 @@ def cmd_correct(args) -> int:
         raise ValueError(f"--out: expected OUT.h5 (the corrected file) or OUT.nc (CF netCDF), got {args.out!r}")
     check_output_file(args.out, args.case, args.calibration)
     command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
-               + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
+               + (f" --calibration {args.calibration}" if args.calibration else "")
+               + (f" --attribution {args.attribution}" if args.attribution else "") + f" --out {args.out}")
     result = correct(args.case, args.method, args.calibration, timing=args.timing, reference=args.reference,
-                     out=args.out, history=command, accept_other_instrument=args.accept_other_instrument)
+                     out=args.out, history=command, accept_other_instrument=args.accept_other_instrument,
+                     attribution=args.attribution)
     for w in result.attrs.get("warnings", []):
         print(f"warning: {w}")
     v = result.vessel_velocity_m_s
@@ -310,12 +314,16 @@ def cmd_export(args) -> int:
     if Path(args.out).suffix.lower() != ".nc":
         raise ValueError(f"--out: expected a netCDF file name ending in .nc, got {args.out!r}")
     check_output_file(args.out, args.input, args.case)
-    ds = export_file(args.input, args.out, case_path=args.case, history="adcpdyn export " + " ".join(
-        [args.input, "--out", args.out] + (["--case", args.case] if args.case else [])))
+    ds = export_file(args.input, args.out, case_path=args.case, attribution=args.attribution,
+                     history="adcpdyn export " + " ".join([args.input, "--out", args.out]
+                                                          + (["--case", args.case] if args.case else [])
+                                                          + (["--attribution", args.attribution] if args.attribution
+                                                             else [])))
     what = f"method {ds.attrs['processing_method']}, " if "processing_method" in ds.attrs else ""
     water = f"{ds.sizes['depth']} cells, " if "depth" in ds.sizes else "no water profile, "
-    print(f"wrote {args.out}: {what}{ds.sizes['time']} pings, {water}time "
-          f"{'UTC' if ds['time'].dtype.kind == 'M' else 'in case-clock seconds (no UTC origin)'}, CF-1.8 (h5netcdf)")
+    dated = "time" in ds.coords
+    print(f"wrote {args.out}: {what}{ds['case_time'].size} pings, {water}time "
+          f"{'UTC' if dated else 'in case-clock seconds (no UTC origin)'}, {ds.attrs['Conventions']} (h5netcdf)")
     return 0
 
 
@@ -701,6 +709,12 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--accept-other-instrument", action="store_true",
                        help="apply a calibration whose CALIB.json names another instrument (refused by default)")
 
+    def attribution_option(s):
+        s.add_argument("--attribution", metavar="ORG.toml",
+                       help="netCDF: who made and distributes the data (creator_*, publisher_*, institution, license, "
+                            "naming_authority, infoUrl, ...: ACDD-1.3/IOOS-1.2 attribute names); 'not stated' without "
+                            "it (docs/examples/attribution.toml)")
+
     command("scenarios", "list the built-in scenarios", cmd_scenarios)
 
     s = command("simulate", "simulate a scenario into a case file (a survey's transects with --runs)", cmd_simulate)
@@ -745,11 +759,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--reference", default="bt", choices=REFERENCES,
                    help="water velocities referenced to the bottom track (bt) or to the GNSS velocity (gnss)")
     s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
+    attribution_option(s)
 
     s = command("export", "a case or a corrected file as CF-1.8 netCDF (ENU, UTC time, xarray-ready)", cmd_export)
     s.add_argument("input", help="CASE.h5 or the output of `adcpdyn correct` (OUT.h5)")
     s.add_argument("--case", help="a corrected file's case (default: the case it names)")
     s.add_argument("--out", required=True, help="OUT.nc")
+    attribution_option(s)
 
     s = command("compare", "every correction method on one case: metrics table and figures", cmd_compare)
     s.add_argument("case", help="CASE.h5 (with /truth, or a GNSS reference)")

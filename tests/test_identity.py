@@ -124,10 +124,10 @@ def test_netcdf_records_the_calibrated_transducer_depth_and_the_entered_one(pool
     m1 = simulate(get_scenario("pool_m1"), seed=1)
     api.correct(m1, "adc", d, out=tmp_path / "m1.nc")
     with xr.open_dataset(tmp_path / "m1.nc") as ds:
-        entered = m1.environment.transducer_depth_m
-        assert float(ds["transducer_depth"]) == pytest.approx(entered + 0.05, abs=1e-12)
-        assert float(ds["transducer_depth_entered"]) == pytest.approx(entered, abs=1e-12)
-        assert "calibrated" in ds["transducer_depth"].attrs["long_name"]
+        entered, adcp = m1.environment.transducer_depth_m, ds["adcp"].attrs  # the instrument's container variable
+        assert adcp["transducer_depth_m"] == pytest.approx(entered + 0.05, abs=1e-12)
+        assert adcp["transducer_depth_entered_m"] == pytest.approx(entered, abs=1e-12)
+        assert "calibrated" in adcp["transducer_depth_comment"]
 
 
 def test_correct_applies_the_site_bed_where_a_runs_own_is_half_determined(pool_calibration):

@@ -59,8 +59,9 @@ print(ds)
 # cells in the bed's side-lobe layer hold the bed's echo, not water: keep those above
 # transducer + (bed - transducer) cos(beam angle), as a hydrographer's processing would
 cos_beam = np.cos(np.deg2rad(ds.attrs["instrument_beam_angle_deg"]))
-clean = ds.depth < ds.transducer_depth + (ds.sea_floor_depth - ds.transducer_depth) * cos_beam
-speed = np.hypot(ds["water_velocity_east"], ds["water_velocity_north"]).where(clean)
+transducer = ds["adcp"].attrs["transducer_depth_m"]  # the instrument's container variable
+clean = ds.depth < transducer + (ds.sea_floor_depth - transducer) * cos_beam
+speed = ds["water_speed"].where(clean)
 profile = speed.median("time")
 print(f"time {ds.time.values[0]} .. {ds.time.values[-1]} (UTC), beams {ds.beam.values.tolist()} "
       f"(case beams {ds.case_beam.values.tolist()})")
