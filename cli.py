@@ -854,7 +854,8 @@ def build_parser() -> argparse.ArgumentParser:
     figure_format(s)
 
     s = command("bench", "benchmarks with their targets", cmd_bench)
-    s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis"],
+    s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis",
+                                     "compliance"],
                    help="which benchmark")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results", help="folder of the results")

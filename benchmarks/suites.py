@@ -16,7 +16,7 @@ from ..models.rotations import course_difference_rad
 from .common import machine as _machine
 from .common import save_figure, write_json
 
-SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis")
+SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis", "compliance")
 
 
 def _calibrate(case, **kw):
@@ -299,6 +299,10 @@ def _suite(suite: str, quick: bool):
         from .solvers import bench_solvers, figure_solvers, print_solvers
 
         return bench_solvers(starts=8, jit=not quick), print_solvers, figure_solvers
+    if suite == "compliance":
+        from .compliance import bench_compliance, figure_compliance, print_compliance
+
+        return bench_compliance(quick), print_compliance, figure_compliance
     if suite == "diagnosis":
         from .diagnosis_real import bench_diagnosis, figure_diagnosis, print_diagnosis
 
