@@ -307,7 +307,7 @@ def cmd_correct(args) -> int:
 
 
 def cmd_export(args) -> int:
-    """A case, or a corrected file with its case, as CF-1.8 netCDF (xarray, h5netcdf)."""
+    """A case, or a corrected file with its case, as CF-1.8 / ACDD-1.3 / IOOS-1.2 netCDF (xarray, h5netcdf)."""
     from .cases.atomic import check_output_file
     from .cases.netcdf import export_file
 
@@ -761,7 +761,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
     attribution_option(s)
 
-    s = command("export", "a case or a corrected file as CF-1.8 netCDF (ENU, UTC time, xarray-ready)", cmd_export)
+    s = command("export", "a case or a corrected file as CF-1.8 / ACDD-1.3 / IOOS-1.2 netCDF (ENU, UTC time, "
+                          "xarray-ready)", cmd_export)
     s.add_argument("input", help="CASE.h5 or the output of `adcpdyn correct` (OUT.h5)")
     s.add_argument("--case", help="a corrected file's case (default: the case it names)")
     s.add_argument("--out", required=True, help="OUT.nc")

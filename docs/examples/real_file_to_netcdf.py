@@ -48,7 +48,7 @@ v = corrected.vessel_velocity_m_s
 print(f"corrected ({corrected.method}): vessel speed {np.nanmedian(np.hypot(v[:, 0], v[:, 1])):.3f} m/s median, "
       f"{int(np.isfinite(corrected.water_velocity_m_s[..., 0]).sum())} water cell velocities")
 
-# %% 4. Export CF-1.8 netCDF (ENU, UTC time, instrument beam numbers, provenance)
+# %% 4. Export CF-1.8 / ACDD-1.3 / IOOS-1.2 netCDF (ENU, UTC time, instrument beam numbers, provenance)
 nc_path = adcpdyn.export(imported, out / f"{case.name}_asc.nc", corrected,
                          history="docs/examples/real_file_to_netcdf.py")
 print(f"wrote {nc_path}")
