@@ -4,8 +4,8 @@ Every function here is exported at the package top (``import adcpdyn``) and does
 command of the same name does (``adcpdyn --help``), with the same checks and the same
 numbers: the command line calls these functions. A case can be given as a case file path,
 a :class:`~adcpdyn.cases.case.Case` or an :class:`ImportedCase`; a calibration as a
-CALIB.json path, a :class:`~adcpdyn.estimators.calibration_result.CalibrationResult`, a
-:class:`~adcpdyn.estimators.calibration_record.CalibrationRecord` or a parsed dict.
+CALIB.json path, a :class:`~adcpdyn.estimators.calibration.result.CalibrationResult`, a
+:class:`~adcpdyn.estimators.calibration.record.CalibrationRecord` or a parsed dict.
 
 Verbs that use the attitude (``calibrate``, ``correct``, ``compare``, ``diagnose``) first
 restrict a case to what its attitude record covers, as the command line does
@@ -30,9 +30,9 @@ if TYPE_CHECKING:  # pragma: no cover - names for annotations only
 
     from .cases.case import Case
     from .estimators.asc import Correction
-    from .estimators.calibration import CalibrationConfig
-    from .estimators.calibration_record import CalibrationRecord
-    from .estimators.calibration_result import CalibrationResult
+    from .estimators.calibration.problem import CalibrationConfig
+    from .estimators.calibration.record import CalibrationRecord
+    from .estimators.calibration.result import CalibrationResult
     from .estimators.diagnosis.diagnose import DiagnosisResult
 
 __all__ = ["ImportedCase", "Comparison", "read_case", "import_file", "simulate", "read_calibration", "calibrate", "field_selftest",
@@ -343,7 +343,7 @@ def read_calibration(path) -> "CalibrationRecord":
     ValueError
         One line naming the file and the key.
     """
-    from .estimators.calibration_record import CalibrationRecord
+    from .estimators.calibration.record import CalibrationRecord
 
     return CalibrationRecord.from_json(path)
 
@@ -379,7 +379,7 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
     ValueError
         An unknown option, a bad case, or a problem the calibration refuses (one line).
     """
-    from .estimators.calibration import CalibrationConfig, CalibrationProblem
+    from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     config = config or CalibrationConfig()
     known = {f.name for f in dataclasses.fields(CalibrationConfig)}
@@ -446,7 +446,7 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         One line naming the argument or field.
     """
     from .cases.hashing import sha256_of
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import calibration_dict
     from .estimators.correct_case import as_calibrated_run, correct_case
 
     _choice("method", method, CORRECTION_METHODS)
@@ -515,7 +515,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     import json
 
     from .cases.coverage import reference_at
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import calibration_dict
     from .estimators.correct_case import as_calibrated_run, correct_case
     from .estimators.metrics import velocity_metrics
 
@@ -548,13 +548,13 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     comparison = Comparison(c.name, label, table, results, not_run, notes)
     if out is not None:
         from .cases.atomic import atomic_path
-        from .estimators.calibration import _jsonable
+        from .estimators.calibration.result import jsonable
         from .plots import velocity_figure
 
         folder = Path(out)
         table_path, figure_path = folder / f"{c.name}_compare.json", folder / f"{c.name}_compare.{fmt}"
         with atomic_path(table_path) as tmp, open(tmp, "w") as fh:
-            json.dump(_jsonable({**table, "against": label, "not_run": not_run, "warnings": notes}), fh, indent=2)
+            json.dump(jsonable({**table, "against": label, "not_run": not_run, "warnings": notes}), fh, indent=2)
         legend = "truth" if label == "truth" else "reference (at rest)" if c.reference.stationary else "GNSS"
         velocity_figure(c.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, ref,
                         f"{c.name}: corrections against {comparison.against_text}", figure_path, reference_label=legend)
@@ -607,7 +607,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     ValueError
         Too few pings, no attitude, an unknown effect or option (one line).
     """
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import calibration_dict
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
@@ -674,7 +674,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         ``rows`` (per run: error, size, verdict, named or not, shrink, estimate, gap) and
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import calibration_dict
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 

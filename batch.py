@@ -15,7 +15,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from .estimators.calibration import CalibrationConfig
+from .estimators.calibration.problem import CalibrationConfig
 
 LOCAL, SERIAL, AUTO = "local", "none", "auto"
 IN_PROCESS_MAX_JOBS = 2  # auto: a LocalCluster costs seconds to start; one or two cases run here
@@ -167,8 +167,8 @@ def run_batch(jobs, scheduler: str = AUTO, n_workers: int | None = None, progres
 def write_summary(rows: list[dict], path) -> None:
     """The batch's summaries as JSON, atomically."""
     from .cases.atomic import atomic_path
-    from .estimators.calibration import _jsonable
+    from .estimators.calibration.result import jsonable
 
     with atomic_path(path) as tmp:
         with open(tmp, "w") as fh:
-            json.dump(_jsonable(rows), fh, indent=2)
+            json.dump(jsonable(rows), fh, indent=2)

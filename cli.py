@@ -215,7 +215,7 @@ from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 def _load_calibration(path):
     """The validated CALIB.json of --calibration (None without one)."""
-    from .estimators.calibration_file import read_calibration
+    from .estimators.calibration.file import read_calibration
 
     return None if path is None else read_calibration(path)
 
@@ -340,7 +340,7 @@ def cmd_compare(args) -> int:
 
 
 def _calibration_config(args, formulation=None):
-    from .estimators.calibration import CalibrationConfig
+    from .estimators.calibration.problem import CalibrationConfig
 
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
@@ -460,7 +460,7 @@ def cmd_demo(args) -> int:
     from .cases.io import write_case
     from .cases.scenario import get_scenario
     from .cases.summary import summarise
-    from .estimators.calibration import CalibrationConfig, CalibrationProblem
+    from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
     from .estimators.evaluation import calibration_errors
     from .estimators.metrics import format_table, velocity_metrics
     from .models.rotations import euler_matrix
@@ -591,7 +591,7 @@ def _diagnose_selftest(args) -> int:
     from tqdm import tqdm
 
     from .cases.atomic import atomic_path, check_output_file
-    from .estimators.calibration import _jsonable
+    from .estimators.calibration.result import jsonable
     from .api import _diagnosis_config
     from .estimators.diagnosis.selftest import draw_cases, format_summary, run_one, summarise
 
@@ -611,7 +611,7 @@ def _diagnose_selftest(args) -> int:
     if args.out:
         with atomic_path(args.out) as tmp:
             with open(tmp, "w") as fh:
-                json.dump(_jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
+                json.dump(jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
                                      "calibrated": args.selftest_calibrated,
                                      "config": {"effects": list(config.effects), "bic_margin": config.bic_margin,
                                                 "min_shrink": config.min_shrink, "gap_z": config.gap_z,

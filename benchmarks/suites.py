@@ -20,7 +20,7 @@ SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "surv
 
 
 def _calibrate(case, **kw):
-    from ..estimators.calibration import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     tic = time.perf_counter()
     r = CalibrationProblem(case, CalibrationConfig(**kw)).solve()

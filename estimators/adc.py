@@ -178,7 +178,7 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
 
 def lever_arms_from_calibration(calibration: dict, case: Case) -> tuple[np.ndarray, np.ndarray]:
     """(lever arms in the case's sensor frame, installation angles for beams) from CALIB.json contents."""
-    from .calibration_file import installation_angles, lever_arms
+    from .calibration.file import installation_angles, lever_arms
 
     if case.attitude.frame == "transducer":
         return lever_arms(calibration, "transducer"), np.zeros(3)
@@ -194,7 +194,7 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
     when the calibration found one (:func:`~adcpdyn.models.sensors.compass_correction`). Other
     cases are returned unchanged.
     """
-    from .calibration_file import heading_misalignment
+    from .calibration.file import heading_misalignment
 
     delta = heading_misalignment(calibration)
     if delta is None or case.attitude.frame != "transducer":
@@ -244,7 +244,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     if method == "oracle":
         if case.truth is None or "attitude_model" not in case.truth.extra_attrs:
             raise ValueError(f"{case.name}: /truth: the oracle needs a case simulated by adcpdyn (true attitude model)")
-        from .calibration_file import attitude_model_from
+        from .calibration.file import attitude_model_from
 
         attitude = attitude_model_from(case.truth.extra_attrs["attitude_model"],
                                        f'{case.name}: /truth.attrs["attitude_model"]')
@@ -252,7 +252,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     else:
         if calibration is None:
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
-        from .calibration_file import as_calibration
+        from .calibration.file import as_calibration
 
         calibration = as_calibration(calibration)
         case = with_heading_misalignment(case, calibration)

@@ -13,23 +13,23 @@ CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
 
 def installation_from(calibration: dict) -> np.ndarray:
     """Installation angles of a CALIB.json, or a one-line error naming the field."""
-    from .calibration_file import installation_angles
+    from .calibration.file import installation_angles
 
     return installation_angles(calibration)
 
 
 def assumed_installation(calibration: dict) -> np.ndarray:
     """The nominal installation angles of the calibration's configuration (the mounting as set up)."""
-    from .calibration_file import nominal_installation
+    from .calibration.file import nominal_installation
 
     return nominal_installation(calibration)
 
 
 def moving_bed_for(calibration: dict | None, case: Case) -> tuple[np.ndarray | None, str]:
     """The bed velocity (north, east) a calibration found under this case's pings, and where it
-    came from (:func:`~adcpdyn.estimators.calibration_file.moving_bed_velocity`, the one lookup:
+    came from (:func:`~adcpdyn.estimators.calibration.file.moving_bed_velocity`, the one lookup:
     the case's own run when both components are determined, else the site's bed, else none)."""
-    from .calibration_file import moving_bed_velocity
+    from .calibration.file import moving_bed_velocity
 
     return moving_bed_velocity(calibration, case.name)
 
@@ -51,15 +51,15 @@ def with_calibrated_depth(case: Case, calibration: dict | None) -> tuple[Case, s
 def as_calibrated_run(case: Case, path, calibration: dict | None,
                       accept_other_instrument: bool = False) -> tuple[Case, list]:
     """The run a calibration is applied to, and the notes on applying it: the calibration checked
-    to be this instrument's (:func:`~.calibration_identity.check_calibration_identity`, a one-line
+    to be this instrument's (:func:`~.calibration.identity.check_calibration_identity`, a one-line
     refusal otherwise), and the case named as the calibration keys its runs (by case name, or by
     file name when the cases shared one) so that :func:`moving_bed_for` finds its own run."""
     from pathlib import Path
 
-    from .calibration_identity import check_calibration_identity
+    from .calibration.identity import check_calibration_identity
 
     if calibration is not None and not isinstance(calibration, dict):
-        from .calibration_record import calibration_dict
+        from .calibration.record import calibration_dict
 
         calibration = calibration_dict(calibration)
     runs = [r.get("case") for r in (calibration or {}).get("runs") or []]
@@ -92,8 +92,8 @@ def correct_case(case: Case, method: str, calibration=None, timing: str = "deep"
     :mod:`adcpdyn.estimators.water`); the heading corrections applied are in the result's attrs.
 
     ``calibration``: None, a CALIB.json path, a parsed dict, a ``CalibrationResult`` or a
-    ``CalibrationRecord`` (:func:`~adcpdyn.estimators.calibration_record.calibration_dict`)."""
-    from .calibration_record import calibration_dict
+    ``CalibrationRecord`` (:func:`~adcpdyn.estimators.calibration.record.calibration_dict`)."""
+    from .calibration.record import calibration_dict
     from .water import check_reference
 
     check_reference(reference)
@@ -145,7 +145,7 @@ def _correct(case: Case, method: str, calibration: dict | None, timing: str, ref
     from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
-    from .calibration_file import as_calibration
+    from .calibration.file import as_calibration
 
     if method not in CORRECTION_METHODS:
         raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")

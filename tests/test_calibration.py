@@ -13,7 +13,7 @@ import pytest
 from conftest import noise_free
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem, calibrate
+from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate
 from adcpdyn.solvers.multistart import SolverOptions
 from adcpdyn.estimators.evaluation import calibration_errors, true_attitude
 from adcpdyn.models.measurement import bottom_track_function
@@ -182,7 +182,7 @@ def test_a_noisy_compass_keeps_the_motion_model_turns_do_not():
     """3-deg compass noise (white) leaves the model in place; the same run with its heading
     readings turned by a slow 20-deg swing (motion the model cannot follow) takes the samples."""
     from adcpdyn.estimators.attitude_fit import fit_attitude
-    from adcpdyn.estimators.calibration import choose_attitude
+    from adcpdyn.estimators.calibration.problem import choose_attitude
 
     sc = get_scenario("pool_m0")
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, noise=dataclasses.replace(sc.run.noise, heading_rad=np.deg2rad(3.0))))
@@ -302,7 +302,7 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     latter with the beams' attitude from the sensor's samples (per-row attitude data). Three
     cores and one worker: the assembled problem's per-row Jacobians are split over three threads."""
     from adcpdyn.estimators import measurement_model
-    from adcpdyn.estimators.calibration import CalibrationProblem
+    from adcpdyn.estimators.calibration.problem import CalibrationProblem
 
     monkeypatch.setattr(measurement_model.os, "cpu_count", lambda: 3)
 

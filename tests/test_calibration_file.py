@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from adcpdyn.cli import main
-from adcpdyn.estimators.calibration_file import KEYS, lever_arms, read_calibration, validate_calibration
+from adcpdyn.estimators.calibration.file import KEYS, lever_arms, read_calibration, validate_calibration
 from conftest import calibrated_pool_m0
 
 
@@ -175,7 +175,7 @@ def test_every_key_of_the_table_is_checked():
 def test_what_the_multi_run_writer_emits_is_valid():
     """The shape of a schema-2 CALIB.json of a joint survey calibration (keys as its writer emits
     them, undetermined numbers null), and the bed each run is corrected with."""
-    from adcpdyn.estimators.calibration_file import moving_bed_velocity
+    from adcpdyn.estimators.calibration.file import moving_bed_velocity
 
     d = {"schema_version": 2, "radius_vectors_m": [[0.1, 0.0, 0.5]] * 4, "radius_vectors_head_m": [[None] * 3] * 4,
          "installation_ypr_rad": [0.2, None, None], "heading_misalignment_rad": 0.2, "heading_misalignment_se_rad": None,

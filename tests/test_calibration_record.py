@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration_record import CalibrationRecord, calibration_dict
-from adcpdyn.estimators.calibration_result import CalibrationResult
+from adcpdyn.estimators.calibration.record import CalibrationRecord, calibration_dict
+from adcpdyn.estimators.calibration.result import CalibrationResult
 from adcpdyn.estimators.correct_case import correct_case
 from adcpdyn.cases.simulation import simulate
 from conftest import calibrated_pool_m0

@@ -15,7 +15,7 @@ from adcpdyn.cases.corrected import read_correction
 from adcpdyn.cases.io import case_warnings, read_case, write_case
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
-from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
+from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 from adcpdyn.cases.simulation import simulate
 
 SANE_M_S = 20.0  # no boat in these cases moves faster

@@ -15,8 +15,8 @@ from adcpdyn.cases.identity import (InstrumentIdentity, Site, days_apart, distan
 from adcpdyn.cases.io import read_case, write_case
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.calibration_identity import check_calibration_identity
-from adcpdyn.estimators.calibration_record import CalibrationRecord, calibration_dict
+from adcpdyn.estimators.calibration.identity import check_calibration_identity
+from adcpdyn.estimators.calibration.record import CalibrationRecord, calibration_dict
 
 
 def _ident(**changes):
@@ -96,7 +96,7 @@ def test_every_verb_refuses_another_instruments_calibration_and_writes_nothing(p
 
 
 def test_joint_calibration_refuses_two_instruments_and_warns_on_two_sites():
-    from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
+    from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     m0 = simulate(get_scenario("pool_m0"), seed=1)
     sc = get_scenario("diag_boat")

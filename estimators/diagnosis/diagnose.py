@@ -38,7 +38,7 @@ from ...models.effects import CATALOG, get_effect
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
-from ..calibration import ATTITUDES, choose_attitude
+from ..calibration.problem import ATTITUDES, choose_attitude
 from ..hac import andrews_lags, newey_west
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  knot_times, ping_knots)
@@ -591,7 +591,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
     to its truth."""
     cases = [cases] if isinstance(cases, Case) else list(cases)
     if calibration is not None:
-        from ..calibration_file import as_calibration
+        from ..calibration.file import as_calibration
 
         calibration = as_calibration(calibration)
     for case in cases:

@@ -130,11 +130,11 @@ def write_field_selftest(res: dict, json_path, fmt: str = "png") -> list:
     import matplotlib.pyplot as plt
 
     from ...cases.atomic import atomic_path
-    from ..calibration import _jsonable
+    from ..calibration.result import jsonable
 
     json_path = Path(json_path)
     with atomic_path(json_path) as tmp, open(tmp, "w") as fh:
-        json.dump(_jsonable(res), fh, indent=2)
+        json.dump(jsonable(res), fh, indent=2)
     md = json_path.with_suffix(".md")
     with atomic_path(md) as tmp:
         Path(tmp).write_text(f"# Field errors injected into {res.get('case', 'the file')}\n\n" + format_field_selftest(res) + "\n")

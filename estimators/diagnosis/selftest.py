@@ -104,7 +104,7 @@ CALIBRATION_STARTS = 8  # multistart of the calibrated self-test's calibration r
 def calibration_of(platform: str, slow_attitude: bool, ar1: float, sim_seed: int) -> dict:
     """The paper's workflow: the platform calibrated on an effect-free run of its own (another
     noise seed, another case name, so no run-specific number of it is pinned in the diagnosis)."""
-    from ..calibration import CalibrationConfig, calibrate
+    from ..calibration.problem import CalibrationConfig, calibrate
 
     case = simulate(platform_scenario(platform, slow_attitude, ar1), seed=(sim_seed + 7919) % (2**31 - 1))
     case = dataclasses.replace(case, name=case.name + "_calibration", truth=None)

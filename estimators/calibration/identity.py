@@ -8,7 +8,7 @@ it is, and is applied with a note saying so.
 
 from __future__ import annotations
 
-from ..cases.identity import InstrumentIdentity, Site, identity_of, instrument_difference, site_differences, site_of
+from ...cases.identity import InstrumentIdentity, Site, identity_of, instrument_difference, site_differences, site_of
 
 OVERRIDE_FLAG = "--accept-other-instrument"
 

@@ -490,7 +490,7 @@ def nominal_installation(calibration) -> np.ndarray:
 def attitude_model_from(value, where: str):
     """An ``AttitudeParams`` from its dict (``AttitudeParams.to_dict``) or JSON text, checked as
     CALIB.json's ``attitude_model`` is; ``where`` names it in the one-line error."""
-    from ..models.motion import AttitudeParams
+    from ...models.motion import AttitudeParams
 
     if isinstance(value, (str, bytes)):
         try:

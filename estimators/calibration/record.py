@@ -1,7 +1,7 @@
 """A CALIB.json as a typed, read-only record, and the one conversion every reader goes through.
 
 :class:`CalibrationRecord` is what :meth:`CalibrationResult.from_json
-<adcpdyn.estimators.calibration_result.CalibrationResult.from_json>` and
+<adcpdyn.estimators.calibration.result.CalibrationResult.from_json>` and
 :func:`adcpdyn.read_calibration` return: the numbers the corrections and the diagnosis
 read (lever arms, installation angles, heading misalignment, compass deviation,
 declination, moving bed per run, attitude model and source, noise levels, runs), typed,
@@ -12,8 +12,8 @@ CALIB.json in a form worth rebuilding; the parsed file stays available (:attr:`d
 
 :func:`calibration_dict` turns any way a calibration is handed over (a CALIB.json path,
 a parsed dict, a :class:`CalibrationResult`, a :class:`CalibrationRecord`, or None) into the
-validated dict (:class:`~adcpdyn.estimators.calibration_file.Calibration`) the
-estimators read, through :func:`~adcpdyn.estimators.calibration_file.as_calibration`, which
+validated dict (:class:`~adcpdyn.estimators.calibration.file.Calibration`) the
+estimators read, through :func:`~adcpdyn.estimators.calibration.file.as_calibration`, which
 knows every form by its shape (path, dict, ``to_dict()``): the file, record and result modules
 import one way only (result -> record -> file).
 """
@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cases.identity import InstrumentIdentity, Site
-from .calibration_file import Calibration, as_calibration, moving_bed_velocity, read_calibration
+from ...cases.identity import InstrumentIdentity, Site
+from .file import Calibration, as_calibration, moving_bed_velocity, read_calibration
 
 __all__ = ["CalibrationRecord", "RunRecord", "calibration_dict"]
 
@@ -57,7 +57,7 @@ def _float_or_none(value) -> float | None:
 def _attitude(value, where: str):
     if not value:
         return None
-    from .calibration_file import attitude_model_from
+    from .file import attitude_model_from
 
     return attitude_model_from(value, where)
 
@@ -173,7 +173,7 @@ class CalibrationRecord:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_json(cls, path) -> "CalibrationRecord":
-        """Read, validate (:func:`~adcpdyn.estimators.calibration_file.read_calibration`) and type a CALIB.json.
+        """Read, validate (:func:`~adcpdyn.estimators.calibration.file.read_calibration`) and type a CALIB.json.
 
         Raises
         ------
@@ -249,7 +249,7 @@ class CalibrationRecord:
 
     def moving_bed_for(self, case_name: str) -> np.ndarray | None:
         """The bed velocity (north, east) that applies to a case: its run's own, else the site's, else
-        None (:func:`~adcpdyn.estimators.calibration_file.moving_bed_velocity`, the one lookup)."""
+        None (:func:`~adcpdyn.estimators.calibration.file.moving_bed_velocity`, the one lookup)."""
         return moving_bed_velocity(self.data, case_name)[0]
 
     def to_dict(self) -> Calibration:
@@ -259,7 +259,7 @@ class CalibrationRecord:
 
 def calibration_dict(calibration) -> Calibration | None:
     """The validated CALIB.json dict the estimators read, from any form a calibration is handed over in
-    (:func:`~adcpdyn.estimators.calibration_file.as_calibration`), or None for None.
+    (:func:`~adcpdyn.estimators.calibration.file.as_calibration`), or None for None.
 
     Parameters
     ----------
