@@ -198,17 +198,17 @@ def _keyed(sources: list) -> list:
     return [dataclasses.replace(s, case=s.case.replace(name=Path(s.path).stem)) if s.path else s for s in sources]
 
 
-def _calibration_provenance(calibration) -> dict:
-    """What a correction records of the calibration it was given: file and SHA-256, or that it was in memory."""
+def _calibration_provenance(calibration, record) -> dict:
+    """What a correction records of the calibration it was given (``calibration``, read into
+    ``record``): file and SHA-256, or that it was in memory."""
     from .cases.hashing import sha256_of
 
-    if calibration is None:
+    if record is None:
         return {"calibration_file": "none"}
     if isinstance(calibration, (str, os.PathLike)):
         return {"calibration_file": str(calibration), "calibration_sha256": sha256_of(calibration)}
-    source = getattr(calibration, "source", "") or ""
-    if source and Path(source).is_file():  # a record or a dict read from a file
-        return {"calibration_file": source, "calibration_sha256": sha256_of(source)}
+    if record.source and Path(record.source).is_file():  # a record read from a file
+        return {"calibration_file": record.source, "calibration_sha256": sha256_of(record.source)}
     return {"calibration_file": f"none (a {type(calibration).__name__} in memory, not a file)"}
 
 
@@ -446,7 +446,7 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         One line naming the argument or field.
     """
     from .cases.hashing import sha256_of
-    from .estimators.calibration.record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run, correct_case
 
     _choice("method", method, CORRECTION_METHODS)
@@ -456,16 +456,16 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         from .cases.atomic import check_output_file
 
         check_output_file(out, *[p for p in (case, calibration) if isinstance(p, (str, os.PathLike))], option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     src, notes = _prepared(_source(case))
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
     result = correct_case(c, method, cal, timing, reference)
     if notes:
         result.attrs["warnings"] = notes
-    result.attrs.update(_calibration_provenance(calibration))
-    if cal is not None and cal.get("provenance"):
-        result.attrs["calibration_provenance"] = cal["provenance"]
+    result.attrs.update(_calibration_provenance(calibration, cal))
+    if cal is not None and cal.provenance:
+        result.attrs["calibration_provenance"] = cal.provenance
     result.attrs.update(source_case_name=c.name, source_case_file=src.path,
                         source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
     if out is not None:
@@ -515,7 +515,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     import json
 
     from .cases.coverage import reference_at
-    from .estimators.calibration.record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run, correct_case
     from .estimators.metrics import velocity_metrics
 
@@ -524,7 +524,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
         from .cases.atomic import check_output_folder
 
         check_output_folder(out, option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     src, notes = _prepared(_source(case))
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
@@ -607,7 +607,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     ValueError
         Too few pings, no attitude, an unknown effect or option (one line).
     """
-    from .estimators.calibration.record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
@@ -620,7 +620,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         from .cases.atomic import check_output_file
 
         check_output_file(out, *[p for p in [*items, calibration] if isinstance(p, (str, os.PathLike))], option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     prepared = [_prepared(_source(c, "cases")) for c in items]
     notes = [n for _, ns in prepared for n in ns]
     sources = []
@@ -674,7 +674,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         ``rows`` (per run: error, size, verdict, named or not, shrink, estimate, gap) and
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
-    from .estimators.calibration.record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
@@ -688,7 +688,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
     if calibration is None:
         calibration = calibrate(src.case, n_starts=8)
         note = "calibrated on itself (8 starts): no --calibration given"
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     run, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
     config = _diagnosis_config(effects, attitude, navigation)

@@ -214,8 +214,8 @@ from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
 def _load_calibration(path):
-    """The validated CALIB.json of --calibration (None without one)."""
-    from .estimators.calibration.file import read_calibration
+    """The --calibration CALIB.json read, validated and typed (None without one)."""
+    from .api import read_calibration
 
     return None if path is None else read_calibration(path)
 

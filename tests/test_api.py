@@ -46,6 +46,7 @@ def test_import_adcpdyn_is_light_and_exposes_the_api():
 
 
 def test_correct_takes_the_result_its_dict_its_file_and_its_record_with_the_same_numbers(calibrated):
+    from adcpdyn.estimators.calibration.record import as_record
     from adcpdyn.estimators.correct_case import correct_case
 
     result, path, _, m1 = calibrated
@@ -57,9 +58,9 @@ def test_correct_takes_the_result_its_dict_its_file_and_its_record_with_the_same
         assert np.isfinite(ref).all()
         for k, r in out.items():
             np.testing.assert_array_equal(r.vessel_velocity_m_s, ref, err_msg=f"{method} with the {k}")
-    # the issue's symptom: the estimators' entry point took only dicts ('get')
+    # the estimators read the record the API reads every form into once
     case = adcpdyn.read_case(m1)
-    direct = correct_case(case, "adc", result).vessel_velocity_m_s
+    direct = correct_case(case, "adc", as_record(result)).vessel_velocity_m_s
     np.testing.assert_array_equal(direct, adcpdyn.correct(case, "adc", result).vessel_velocity_m_s)
     with pytest.raises(ValueError, match=r"^calibration: expected a CALIB.json path, a dict, a CalibrationResult"):
         adcpdyn.correct(m1, "adc", 3.0)

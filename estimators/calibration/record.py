@@ -1,33 +1,31 @@
-"""A CALIB.json as a typed, read-only record, and the one conversion every reader goes through.
+"""A CALIB.json as a typed, read-only record: what every reader of a calibration uses.
 
-:class:`CalibrationRecord` is what :meth:`CalibrationResult.from_json
-<adcpdyn.estimators.calibration.result.CalibrationResult.from_json>` and
-:func:`adcpdyn.read_calibration` return: the numbers the corrections and the diagnosis
-read (lever arms, installation angles, heading misalignment, compass deviation,
-declination, moving bed per run, attitude model and source, noise levels, runs), typed,
-in SI units, NaN or ``None`` where the file says "not determined" (``null``). It is a
-view of a validated file, not a rebuilt :class:`CalibrationResult`: the solver's
-per-start table, the uncertainty object and the configuration dataclass are not in a
-CALIB.json in a form worth rebuilding; the parsed file stays available (:attr:`data`).
+A calibration is read once, where it enters (the API, the command line, a batch job), by
+:func:`as_record`, from any form it is handed over in (a CALIB.json path, a parsed dict, a
+:class:`~adcpdyn.estimators.calibration.result.CalibrationResult`, a record); the corrections,
+the diagnosis and the netCDF writer read its typed fields and methods (the bed of a run, the
+lever arms in a frame, the installation angles with their fallback, the heading correction),
+never the file's keys. Numbers are in SI units, NaN or ``None`` where the file says "not
+determined" (``null``), and a method refuses in one line naming the key only when its reader
+needs a value the file does not determine.
 
-:func:`calibration_dict` turns any way a calibration is handed over (a CALIB.json path,
-a parsed dict, a :class:`CalibrationResult`, a :class:`CalibrationRecord`, or None) into the
-validated dict (:class:`~adcpdyn.estimators.calibration.file.Calibration`) the
-estimators read, through :func:`~adcpdyn.estimators.calibration.file.as_calibration`, which
-knows every form by its shape (path, dict, ``to_dict()``): the file, record and result modules
-import one way only (result -> record -> file).
+It is a view of a validated file (:mod:`.file`), not a rebuilt ``CalibrationResult``: the
+solver's per-start table, the uncertainty object and the configuration dataclass are not in
+a CALIB.json in a form worth rebuilding; the parsed file stays available (:attr:`data`).
+Imports run one way: file <- record <- result.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ...cases.identity import InstrumentIdentity, Site
-from .file import Calibration, as_calibration, moving_bed_velocity, read_calibration
+from .file import Calibration, calibration_from_dict, read_calibration, source_prefix
 
-__all__ = ["CalibrationRecord", "RunRecord", "calibration_dict"]
+__all__ = ["CalibrationRecord", "RunRecord", "as_record"]
 
 
 def _array(value, shape) -> np.ndarray:
@@ -35,6 +33,11 @@ def _array(value, shape) -> np.ndarray:
     if value is None:
         return np.full(shape, np.nan)
     return np.array(_nan_for_none(value), dtype=float).reshape(shape)
+
+
+def _array_if_present(c: dict, key: str, shape) -> np.ndarray | None:
+    """:func:`_array` of a key, None when the file does not hold the key."""
+    return _array(c[key], shape) if key in c else None
 
 
 def _nan_for_none(value):
@@ -54,12 +57,18 @@ def _float_or_none(value) -> float | None:
     return None if value is None else float(value)
 
 
-def _attitude(value, where: str):
+def _sin_cos(value) -> tuple | None:
+    """(sin, cos) of a compass deviation object, NaN for a component not determined; None without one."""
     if not value:
         return None
-    from .file import attitude_model_from
+    return tuple(np.nan if value.get(k) is None else float(value[k]) for k in ("sin", "cos"))
 
-    return attitude_model_from(value, where)
+
+def _attitude(value):
+    """The attitude model of a validated file (its shape checked there), or None."""
+    from ...models.motion import AttitudeParams  # CasADi: loaded when a file holds a model
+
+    return AttitudeParams.from_dict(value) if value else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,8 +103,10 @@ class CalibrationRecord:
     lever_arms_m, lever_arms_se_m : ndarray (4, 3)
         Lever arms in the attitude sensor's frame (the head frame for a head sensor:
         ``radius_vectors_head_m``, else ``radius_vectors_m``) and their standard errors.
-    radius_vectors_m, radius_vectors_se_m : ndarray (4, 3)
-        Lever arms in the body (vessel) frame.
+    radius_vectors_m, radius_vectors_se_m : ndarray (4, 3) or None
+        Lever arms in the body (vessel) frame; None when the file has none.
+    radius_vectors_head_m, radius_vectors_head_se_m : ndarray (4, 3) or None
+        Lever arms in the head frame (a head sensor's calibration); None when the file has none.
     installation_ypr_rad, installation_ypr_se_rad : ndarray (3,)
         Installation yaw, pitch, roll (for a head sensor on a moving run the yaw is the
         heading misalignment, pitch and roll NaN).
@@ -105,13 +116,15 @@ class CalibrationRecord:
     heading_misalignment_rad, heading_misalignment_se_rad : float or None
         True heading = sensor heading + misalignment (+ compass deviation).
     compass_deviation_rad : tuple (B, C) or None
-        B (sin psi - mean_sin) + C (cos psi - mean_cos); ``compass_deviation_centre`` holds
-        (mean_sin, mean_cos).
+        B (sin psi - mean_sin) + C (cos psi - mean_cos), NaN for a coefficient not
+        determined; ``compass_deviation_centre`` holds (mean_sin, mean_cos).
     magnetic_declination_rad, compass_error_rad : float or None
     moving_bed : str
-        ``off``, ``constant`` or ``section`` (``off`` when the file has no bed).
+        ``off``, ``constant`` or ``section`` (``constant`` for a bed velocity without a model,
+        ``off`` when the file has no bed).
     moving_bed_velocity_m_s, moving_bed_velocity_se_m_s : ndarray (2,) or None
-        The site's bed (north, east); each run's own is in ``runs``.
+        The site's bed (north, east), None unless both components are determined; each run's
+        own is in ``runs``; :meth:`moving_bed_for` is the one lookup.
     attitude_model : AttitudeParams or None
     attitude_source : str
         ``model`` or ``samples``: the attitude the beams used.
@@ -131,15 +144,17 @@ class CalibrationRecord:
     source : str
         The file it was read from ('' when built from a dict in memory).
     data : Calibration
-        The validated dict itself (what :func:`calibration_dict` returns for this record).
+        The validated file itself (for display; the readers use the typed fields).
     """
 
     schema_version: int
     attitude_frame: str
     lever_arms_m: np.ndarray
     lever_arms_se_m: np.ndarray
-    radius_vectors_m: np.ndarray
-    radius_vectors_se_m: np.ndarray
+    radius_vectors_m: np.ndarray | None
+    radius_vectors_se_m: np.ndarray | None
+    radius_vectors_head_m: np.ndarray | None
+    radius_vectors_head_se_m: np.ndarray | None
     installation_ypr_rad: np.ndarray
     installation_ypr_se_rad: np.ndarray
     installation_determined: bool
@@ -184,51 +199,50 @@ class CalibrationRecord:
 
     @classmethod
     def from_dict(cls, d) -> "CalibrationRecord":
-        """Type a parsed CALIB.json (validated first unless it already is a ``Calibration``)."""
-        c = as_calibration(d)
-        where = f"calibration {c.source}" if c.source else "calibration"
+        """Type a parsed CALIB.json (validated first unless it already is a ``Calibration``:
+        :func:`~adcpdyn.estimators.calibration.file.calibration_from_dict`)."""
+        c = calibration_from_dict(d)
         frame = c.get("attitude_frame") or "vessel"
         head_key = "radius_vectors_head_m" if frame == "transducer" and "radius_vectors_head_m" in c else "radius_vectors_m"
         head_se = "radius_vectors_head_se_m" if head_key == "radius_vectors_head_m" else "radius_vectors_se_m"
-        deviation = c.get("compass_deviation_rad")
-        dev = None if not deviation or deviation.get("sin") is None or deviation.get("cos") is None else (
-            float(deviation["sin"]), float(deviation["cos"]))
-        centre = (float((deviation or {}).get("mean_sin", 0.0)), float((deviation or {}).get("mean_cos", 0.0)))
-        dev_se = c.get("compass_deviation_se_rad") or {}
-        dev_se = None if dev_se.get("sin") is None or dev_se.get("cos") is None else (float(dev_se["sin"]),
-                                                                                     float(dev_se["cos"]))
+        deviation = c.get("compass_deviation_rad") or {}
+        centre = tuple(0.0 if deviation.get(k) is None else float(deviation[k]) for k in ("mean_sin", "mean_cos"))
         bed = c.get("moving_bed")
+        bed_model = bed.get("model") if isinstance(bed, dict) else None
         nominal = (c.get("config") or {}).get("nominal_installation_ypr_rad")
         runs = tuple(RunRecord(
             case=str(r["case"]), n_pings=r.get("n_pings"),
             moving_bed_velocity_m_s=_vector_or_none(r.get("moving_bed_velocity_m_s")),
             moving_bed_velocity_se_m_s=_vector_or_none(r.get("moving_bed_velocity_se_m_s")),
             attitude_source=r.get("attitude_source"),
-            attitude_model=_attitude(r.get("attitude_model"), f"{where}: runs[{i}]"),
+            attitude_model=_attitude(r.get("attitude_model")),
             transducer_depth_offset_m=_float_or_none(r.get("transducer_depth_offset_m")),
             noise_sigma=dict(r.get("noise_sigma") or {}), chi2_per_channel=dict(r.get("chi2_per_channel") or {}),
-        ) for i, r in enumerate(c.get("runs") or []))
+        ) for r in c.get("runs") or [])
         solver = c.get("solver") or {}
         return cls(
             schema_version=int(c.get("schema_version", 1)),
             attitude_frame=frame,
             lever_arms_m=_array(c.get(head_key), (4, 3)),
             lever_arms_se_m=_array(c.get(head_se), (4, 3)),
-            radius_vectors_m=_array(c.get("radius_vectors_m"), (4, 3)),
-            radius_vectors_se_m=_array(c.get("radius_vectors_se_m"), (4, 3)),
+            radius_vectors_m=_array_if_present(c, "radius_vectors_m", (4, 3)),
+            radius_vectors_se_m=_array_if_present(c, "radius_vectors_se_m", (4, 3)),
+            radius_vectors_head_m=_array_if_present(c, "radius_vectors_head_m", (4, 3)),
+            radius_vectors_head_se_m=_array_if_present(c, "radius_vectors_head_se_m", (4, 3)),
             installation_ypr_rad=_array(c.get("installation_ypr_rad"), (3,)),
             installation_ypr_se_rad=_array(c.get("installation_ypr_se_rad"), (3,)),
             installation_determined=bool(c.get("installation_determined", False)),
             nominal_installation_ypr_rad=None if nominal is None else _array(nominal, (3,)),
             heading_misalignment_rad=_float_or_none(c.get("heading_misalignment_rad")),
             heading_misalignment_se_rad=_float_or_none(c.get("heading_misalignment_se_rad")),
-            compass_deviation_rad=dev, compass_deviation_centre=centre, compass_deviation_se_rad=dev_se,
+            compass_deviation_rad=_sin_cos(c.get("compass_deviation_rad")), compass_deviation_centre=centre,
+            compass_deviation_se_rad=_sin_cos(c.get("compass_deviation_se_rad")),
             magnetic_declination_rad=_float_or_none(c.get("magnetic_declination_rad")),
             compass_error_rad=_float_or_none(c.get("compass_error_rad")),
-            moving_bed=str((bed or {}).get("model", "off")) if isinstance(bed, dict) else "off",
+            moving_bed=str(bed_model) if bed_model else "constant" if c.get("moving_bed_velocity_m_s") else "off",
             moving_bed_velocity_m_s=_vector_or_none(c.get("moving_bed_velocity_m_s")),
             moving_bed_velocity_se_m_s=_vector_or_none(c.get("moving_bed_velocity_se_m_s")),
-            attitude_model=_attitude(c.get("attitude_model"), where),
+            attitude_model=_attitude(c.get("attitude_model")),
             attitude_source=str(c.get("attitude_source") or "model"),
             noise_sigma=dict(c.get("noise_sigma") or {}),
             chi2_per_channel=dict(c.get("chi2_per_channel") or {}),
@@ -242,35 +256,86 @@ class CalibrationRecord:
             site=Site.from_dict(c["site"]) if c.get("site") else None,
         )
 
-    # ------------------------------------------------------------------ views
+    # ------------------------------------------------------------------ what the readers use
+    def _refuse(self, text: str) -> ValueError:
+        return ValueError(f"{source_prefix(self.source)}{text}")
+
     def run_for(self, case_name: str) -> RunRecord | None:
         """The run of that case name, or None."""
         return next((r for r in self.runs if r.case == case_name), None)
 
-    def moving_bed_for(self, case_name: str) -> np.ndarray | None:
-        """The bed velocity (north, east) that applies to a case: its run's own, else the site's, else
-        None (:func:`~adcpdyn.estimators.calibration.file.moving_bed_velocity`, the one lookup)."""
-        return moving_bed_velocity(self.data, case_name)[0]
+    def moving_bed_for(self, case_name: str) -> tuple[np.ndarray | None, str]:
+        """The bed velocity (north, east) under a case's pings, and where it came from: the case's
+        own run when both its components are determined, else the site's bed when both of its
+        are, else ``(None, "")``. The one bed lookup: never a half-determined (NaN) bed."""
+        own = self.run_for(case_name)
+        if own is not None and own.moving_bed_velocity_m_s is not None:
+            return own.moving_bed_velocity_m_s, f"run {case_name!r} of the calibration"
+        if self.moving_bed_velocity_m_s is None:
+            return None, ""
+        why = "this case is not one of its runs" if own is None else "this run's own is not determined"
+        return self.moving_bed_velocity_m_s, f"the calibration's site bed ({why})"
 
-    def to_dict(self) -> Calibration:
-        """The validated dict the estimators read (the parsed file)."""
-        return self.data
+    def lever_arms_in(self, frame: str, purpose: str = "this calibration cannot correct") -> np.ndarray:
+        """The (4, 3) lever arms in an attitude sensor's frame: the head frame for a head sensor
+        (``frame="transducer"``), else the body frame; a one-line error naming the key when the
+        file has none or any is not determined (null)."""
+        key = "radius_vectors_head_m" if frame == "transducer" else "radius_vectors_m"
+        arms = self.radius_vectors_head_m if frame == "transducer" else self.radius_vectors_m
+        if arms is None:
+            raise self._refuse(f"{key}: missing; expected the output of `adcpdyn calibrate` ({purpose})")
+        if not np.all(np.isfinite(arms)):
+            raise self._refuse(f"{key}: contains undetermined (null) values; {purpose}")
+        return arms.copy()
+
+    def installation(self) -> np.ndarray:
+        """The installation (yaw, pitch, roll) in radians, or a one-line error when missing or not determined."""
+        if not np.all(np.isfinite(self.installation_ypr_rad)):
+            raise self._refuse("installation_ypr_rad: missing or not determined; expected 3 angles in radians")
+        return self.installation_ypr_rad.copy()
+
+    def installation_or_nominal(self) -> tuple[np.ndarray, bool]:
+        """The installation angles to turn the beams by, and whether the calibration determined them:
+        the calibrated ones, else the nominal ones of its configuration (the mounting as set up);
+        a one-line error when neither is known."""
+        if np.all(np.isfinite(self.installation_ypr_rad)):
+            return self.installation_ypr_rad.copy(), True
+        nominal = self.nominal_installation_ypr_rad
+        if nominal is None or not np.all(np.isfinite(nominal)):
+            raise self._refuse("installation_ypr_rad is not determined and config.nominal_installation_ypr_rad is "
+                               "missing; expected 3 angles in radians")
+        return nominal.copy(), False
+
+    def compass_deviation_applied(self) -> tuple[float, float, float, float]:
+        """(B, C, mean_sin, mean_cos) of the one-cycle compass deviation a head sensor's headings are
+        corrected by (:func:`~adcpdyn.models.sensors.compass_correction`): a coefficient not
+        determined (null) or absent is 0, the others are applied."""
+        deviation = self.compass_deviation_rad or (0.0, 0.0)
+        return (*(float(v) if np.isfinite(v) else 0.0 for v in deviation), *self.compass_deviation_centre)
 
 
-def calibration_dict(calibration) -> Calibration | None:
-    """The validated CALIB.json dict the estimators read, from any form a calibration is handed over in
-    (:func:`~adcpdyn.estimators.calibration.file.as_calibration`), or None for None.
+def as_record(calibration) -> CalibrationRecord | None:
+    """The one conversion of a calibration where it enters (API, command line, batch job): a
+    record as it is, a CALIB.json path read and validated, a parsed dict or
+    ``CalibrationResult.to_dict()`` (any object with ``to_dict()``) validated; None for None.
 
     Parameters
     ----------
     calibration : None, str, os.PathLike, dict, CalibrationResult or CalibrationRecord
-        A CALIB.json path (read and validated; the dict's ``source`` is the path), a parsed
-        file or ``CalibrationResult.to_dict()``, a result in memory, or a typed record.
 
     Raises
     ------
     ValueError
-        One line naming the key, for an invalid file or dict; or naming ``calibration``
-        for an object of another type.
+        One line naming the file and the key, for an invalid file or dict; or naming
+        ``calibration`` for an object of another type.
     """
-    return None if calibration is None else as_calibration(calibration)
+    if calibration is None or isinstance(calibration, CalibrationRecord):
+        return calibration
+    if isinstance(calibration, (str, os.PathLike)):
+        return CalibrationRecord.from_json(calibration)
+    if not isinstance(calibration, dict) and callable(getattr(calibration, "to_dict", None)):
+        calibration = calibration.to_dict()
+    if not isinstance(calibration, dict):
+        raise ValueError(f"calibration: expected a CALIB.json path, a dict, a CalibrationResult or a CalibrationRecord, "
+                         f"got {type(calibration).__name__}")
+    return CalibrationRecord.from_dict(calibration)

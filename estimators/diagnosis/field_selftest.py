@@ -12,11 +12,12 @@ import time
 import numpy as np
 
 from ...cases.case import Case
+from ..calibration.record import CalibrationRecord
 from .diagnose import DiagnosisConfig, diagnose
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, has_moving_reference, inject
 
 
-def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig = DiagnosisConfig(),
+def field_selftest(case: Case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
                    sizes: dict | None = None, progress=None) -> dict:
     """Diagnose ``case`` clean and with every field error of ``sizes`` ({error: sizes}, default
     the field's typical ones, :data:`.field_errors.FIELD_ERRORS`) injected, blind.
