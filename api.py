@@ -436,9 +436,10 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     Returns
     -------
     Correction
-        ``vessel_velocity_m_s`` (N, 3) NED, ``water_velocity_m_s`` (N, K, 3) or None, ``attrs``:
-        what was applied (heading misalignment, declination, moving bed, calibration file and
-        SHA-256, source case and SHA-256, warnings).
+        ``vessel_velocity_m_s`` (N, 3) NED, ``water_velocity_m_s`` (N, K, 3) or None,
+        ``provenance`` (:class:`~adcpdyn.cases.corrected.CorrectionProvenance`): what was applied
+        (heading misalignment, declination, moving bed, calibrated and entered transducer depth,
+        calibration file and SHA-256, source case and SHA-256, warnings).
 
     Raises
     ------
@@ -460,14 +461,11 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     src, notes = _prepared(_source(case))
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
-    result = correct_case(c, method, cal, timing, reference)
-    if notes:
-        result.attrs["warnings"] = notes
-    result.attrs.update(_calibration_provenance(calibration, cal))
-    if cal is not None and cal.provenance:
-        result.attrs["calibration_provenance"] = cal.provenance
-    result.attrs.update(source_case_name=c.name, source_case_file=src.path,
-                        source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
+    result = correct_case(c, method, cal, timing, reference).with_provenance(
+        warnings=tuple(notes), **_calibration_provenance(calibration, cal),
+        calibration_provenance=(cal.provenance or None) if cal is not None else None,
+        source_case_name=c.name, source_case_file=src.path,
+        source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
     if out is not None:
         _write_correction(dataclasses.replace(src, case=c), result, out, calibration, history)
     return result

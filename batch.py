@@ -65,7 +65,7 @@ def _correct(job: CorrectJob) -> dict:
     result = correct(job.case_path, job.method, job.calibration_path, timing=job.timing, reference=job.reference,
                      accept_other_instrument=job.accept_other_instrument)
     write_correction(result, job.out_path, source_case=job.case_path)  # the folder is made by the first write
-    notes = result.attrs.get("warnings", [])
+    notes = list(result.provenance.warnings)
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
     return {"success": True, "method": result.method, "pings": len(v),

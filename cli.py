@@ -285,7 +285,7 @@ def cmd_correct(args) -> int:
                + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
     result = correct(args.case, args.method, args.calibration, timing=args.timing, reference=args.reference,
                      out=args.out, history=command, accept_other_instrument=args.accept_other_instrument)
-    for w in result.attrs.get("warnings", []):
+    for w in result.provenance.warnings:
         print(f"warning: {w}")
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
@@ -295,10 +295,11 @@ def cmd_correct(args) -> int:
     if result.water_velocity_m_s is not None:
         w = result.water_velocity_m_s
         print(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
-              f"referenced to {'the bottom track' if result.attrs.get('water_reference') == 'bt' else 'the GNSS'}")
-    for key in ("installation_note", "moving_bed_note"):
-        if result.attrs.get(key):
-            print(f"{'note' if key == 'moving_bed_note' else 'warning'}: {result.attrs[key]}")
+              f"referenced to {'the bottom track' if result.provenance.water_reference == 'bt' else 'the GNSS'}")
+    if result.provenance.installation_note:
+        print(f"warning: {result.provenance.installation_note}")
+    if result.provenance.moving_bed_note:
+        print(f"note: {result.provenance.moving_bed_note}")
     return 0
 
 

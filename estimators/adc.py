@@ -35,7 +35,7 @@ from ..models.kinematics import centre_of_rotation_depth
 from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 from ..models.rotations import euler_matrix
 from ..models.sensors import compass_correction
-from ..cases.corrected import Correction
+from ..cases.corrected import Correction, CorrectionProvenance
 from .attitude_fit import fit_attitude, sampled_attitude
 from .calibration.record import CalibrationRecord
 
@@ -264,9 +264,10 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: Calibration
     if case.water is not None:
         water, relative, info["water_reference"], info["water_reference_note"] = _referenced_water(
             case, attitude, lever, ypr_st, V, tangential, timing, water_reference, calibration, method == "oracle")
+    provenance = CorrectionProvenance(lever_arms_sensor_m=np.asarray(lever), installation_ypr_rad=np.asarray(ypr_st),
+                                      timing=timing, **info)
     return Correction(method=method, time_s=case.pings.time_s.copy(), vessel_velocity_m_s=V, error_velocity_m_s=err,
-                      beams_used=n_good, water_velocity_m_s=water, attrs={"lever_arms_sensor_m": np.asarray(lever).tolist(),
-                                                "installation_ypr_rad": np.asarray(ypr_st).tolist(), "timing": timing, **info},
+                      beams_used=n_good, water_velocity_m_s=water, provenance=provenance,
                       water_relative_velocity_m_s=relative)
 
 

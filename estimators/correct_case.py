@@ -45,16 +45,17 @@ def as_calibrated_run(case: Case, path, calibration: CalibrationRecord | None,
 def with_moving_bed(result, bed: np.ndarray, source: str):
     """Bottom track measures the vessel over a moving bed: add the bed back to the vessel velocity
     and to water velocities referenced to it (not to those referenced to the GNSS, already over
-    ground), and say so in the attributes."""
+    ground), and say so in its provenance."""
     offset = np.array([bed[0], bed[1], 0.0])
     water = result.water_velocity_m_s
-    if water is not None and result.attrs.get("water_reference", "bt") == "bt":
+    if water is not None and result.provenance.water_reference in (None, "bt"):
         water = water + offset
-    attrs = {**result.attrs, "moving_bed_velocity_m_s": offset[:2].tolist(),
-             "moving_bed_note": f"bed velocity from {source} added to the bottom-track vessel velocity "
-                                "(and to the water velocities referenced to it): velocities are over ground"}
+    provenance = result.provenance.replace(
+        moving_bed_velocity_m_s=offset[:2],
+        moving_bed_note=f"bed velocity from {source} added to the bottom-track vessel velocity (and to the water "
+                        "velocities referenced to it): velocities are over ground")
     return dataclasses.replace(result, vessel_velocity_m_s=result.vessel_velocity_m_s + offset, water_velocity_m_s=water,
-                               attrs=attrs)
+                               provenance=provenance)
 
 
 def correct_case(case: Case, method: str, calibration: CalibrationRecord | None = None, timing: str = "deep",
@@ -64,31 +65,32 @@ def correct_case(case: Case, method: str, calibration: CalibrationRecord | None 
     :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``; then the moving bed
     the calibration found under this case added back (:meth:`CalibrationRecord.moving_bed_for`).
     Water cells are referenced to the bottom track or to the GNSS (``reference``: ``bt`` | ``gnss``,
-    :mod:`adcpdyn.estimators.water`); the heading corrections applied are in the result's attrs.
+    :mod:`adcpdyn.estimators.water`); what was applied (headings, bed, transducer depth) is in the
+    result's ``provenance``.
 
     ``calibration``: the typed record (:func:`~adcpdyn.estimators.calibration.record.as_record`
     reads every other form once, where it enters), or None."""
     from .water import check_reference
 
     check_reference(reference)
+    entered = float(case.environment.transducer_depth_m)
     case, depth_note = with_calibrated_depth(case, calibration) if method != "oracle" else (case, "")
     result = _correct(case, method, calibration, timing, reference)
-    result.attrs.update(heading_corrections_applied(case, calibration if method != "oracle" else None))
+    result = result.with_provenance(**heading_corrections_applied(case, calibration if method != "oracle" else None),
+                                    transducer_depth_entered_m=entered)
     if depth_note:
-        result.attrs["transducer_depth_note"] = depth_note
-        result.attrs["transducer_depth_calibrated_m"] = float(case.environment.transducer_depth_m)
+        result = result.with_provenance(transducer_depth_note=depth_note,
+                                        transducer_depth_calibrated_m=float(case.environment.transducer_depth_m))
     if method == "oracle":
         bed, source = _true_bed(case)
     else:
         bed, source = (None, "") if calibration is None else calibration.moving_bed_for(case.name)
-    if bed is None:
-        result.attrs["moving_bed_velocity_m_s"] = None  # recorded: none applied
-        return result
-    return with_moving_bed(result, bed, source)
+    return result if bed is None else with_moving_bed(result, bed, source)  # None: none applied, so recorded
 
 
 def heading_corrections_applied(case: Case, calibration: CalibrationRecord | None) -> dict:
-    """What a correction did to the headings, for its attributes: the heading misalignment and compass
+    """What a correction did to the headings, as :class:`~adcpdyn.cases.corrected.CorrectionProvenance`
+    fields: the heading misalignment and compass
     deviation applied to a head sensor's readings (the misalignment holds the magnetic declination,
     which is not applied again), with the calibration's declination and compass error for the record."""
     delta = None if calibration is None else calibration.heading_misalignment_rad
@@ -101,7 +103,7 @@ def heading_corrections_applied(case: Case, calibration: CalibrationRecord | Non
     return {
         "heading_misalignment_applied_rad": delta,
         "compass_deviation_applied_rad": None if calibration.compass_deviation_rad is None else
-        dict(zip(("sin", "cos", "mean_sin", "mean_cos"), calibration.compass_deviation_applied())),
+        calibration.compass_deviation_applied(),
         "magnetic_declination_rad": calibration.magnetic_declination_rad,
         "compass_error_rad": calibration.compass_error_rad,
         "heading_correction_note": ("true heading = recorded heading + heading misalignment (+ compass deviation): "
@@ -134,7 +136,7 @@ def _correct(case: Case, method: str, calibration: CalibrationRecord | None, tim
                         "configured alignment would; the Earth velocities carry the unknown installation error")
         result = asc(with_heading_misalignment(case, calibration), ypr, water_reference=reference)
         if note:
-            result.attrs["installation_note"] = note
+            result = result.with_provenance(installation_note=note)
     else:
         result = dynamic_correction(case, method, calibration, timing=timing, water_reference=reference)
     if not np.any(result.beams_used >= 3):

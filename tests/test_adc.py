@@ -123,9 +123,9 @@ def test_pings_the_chord_steps_leave_unconverged_go_to_casadi_rootfinder():
     calib = truth_calibration(case)
     default = dynamic_correction(case, "rootfinder", calib)
     bare = dynamic_correction(case, "rootfinder", calib, rootfinder_options=RootfinderOptions(steps=0))
-    assert default.attrs["rootfinder_fallback_pings"] == 0
-    assert bare.attrs["rootfinder_fallback_pings"] > 0
-    assert bare.attrs["rootfinder_unconverged_pings"] == default.attrs["rootfinder_unconverged_pings"] == 0
+    assert default.provenance.rootfinder_fallback_pings == 0
+    assert bare.provenance.rootfinder_fallback_pings > 0
+    assert bare.provenance.rootfinder_unconverged_pings == default.provenance.rootfinder_unconverged_pings == 0
     assert np.nanmax(np.abs(bare.vessel_velocity_m_s - default.vessel_velocity_m_s)) < 1e-9
 
 
@@ -183,5 +183,5 @@ def test_a_calibration_on_the_samples_corrects_with_the_samples():
     for j in (1, 2):
         assert np.sqrt(np.mean((spline[:, j] - true[:, j]) ** 2)) < 0.5 * np.sqrt(np.mean((linear[:, j] - true[:, j]) ** 2))
     exact = dynamic_correction(case, "rootfinder", CalibrationRecord.from_dict({**calib, "attitude_source": "samples"}))
-    assert exact.attrs["rootfinder_unconverged_pings"] == 0
+    assert exact.provenance.rootfinder_unconverged_pings == 0
     assert np.nanmax(np.abs(exact.vessel_velocity_m_s - sampled.vessel_velocity_m_s)) < 1e-4

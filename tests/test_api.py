@@ -72,8 +72,8 @@ def test_the_pipeline_on_a_simulated_case_in_memory(calibrated, tmp_path):
     result, _, _, m1 = calibrated
     case = adcpdyn.read_case(m1)
     corrected = adcpdyn.correct(case, "adc", result)
-    assert corrected.attrs["calibration_file"].startswith("none (a CalibrationResult in memory")
-    assert corrected.attrs["source_case_file"] is None and corrected.attrs["source_case_name"] == "pool_m1"
+    assert corrected.provenance.calibration_file.startswith("none (a CalibrationResult in memory")
+    assert corrected.provenance.source_case_file is None and corrected.provenance.source_case_name == "pool_m1"
     ds = adcpdyn.to_xarray(case, corrected)
     assert ds.sizes["time"] == case.pings.n and ds.attrs["processing_method"] == "adc"
     np.testing.assert_array_equal(ds["vessel_velocity_north"].values, corrected.vessel_velocity_m_s[:, 0])
@@ -212,7 +212,7 @@ def test_a_correction_of_a_case_the_coverage_step_cut_exports(tmp_path):
 
     write_case(case, path)
     corrected = adcpdyn.correct(path, "asc", out=tmp_path / "cut_asc.h5")
-    assert 0 < corrected.time_s.size < case.pings.n and "left out" in corrected.attrs["warnings"][-1]
+    assert 0 < corrected.time_s.size < case.pings.n and "left out" in corrected.provenance.warnings[-1]
     assert main(["export", str(tmp_path / "cut_asc.h5"), "--out", str(tmp_path / "cut.nc")]) == 0
     ds = adcpdyn.to_xarray(path, corrected)
     assert ds.sizes["time"] == corrected.time_s.size

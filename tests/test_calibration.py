@@ -363,7 +363,7 @@ def test_static_correction_with_undetermined_installation_uses_the_nominal_angle
     case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=1)
     calib = {"installation_ypr_rad": [None, None, None], "config": {"nominal_installation_ypr_rad": [0.1, 0.0, 0.0]}}
     out = correct_case(case, "asc", as_record(calib))
-    assert "not determined" in out.attrs["installation_note"]
+    assert "not determined" in out.provenance.installation_note
     assert np.allclose(out.vessel_velocity_m_s, asc(case, np.array([0.1, 0.0, 0.0])).vessel_velocity_m_s, equal_nan=True)
     with pytest.raises(ValueError, match="nominal_installation_ypr_rad is missing"):
         correct_case(case, "asc", as_record({"installation_ypr_rad": [None, None, None]}))

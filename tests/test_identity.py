@@ -143,8 +143,8 @@ def test_correct_applies_the_site_bed_where_a_runs_own_is_half_determined(pool_c
     plain = correct_case(m1, "adc", as_record({k: v for k, v in d.items() if k != "moving_bed_velocity_m_s"} | {"runs": [
         {**d["runs"][0], "moving_bed_velocity_m_s": None}]}))
     result = correct_case(m1, "adc", as_record(d))
-    assert result.attrs["moving_bed_velocity_m_s"] == [0.05, -0.15]
-    assert "site bed" in result.attrs["moving_bed_note"]
+    assert result.provenance.moving_bed_velocity_m_s == (0.05, -0.15)
+    assert "site bed" in result.provenance.moving_bed_note
     np.testing.assert_allclose(result.vessel_velocity_m_s[:, :2] - plain.vessel_velocity_m_s[:, :2],
                                np.tile([0.05, -0.15], (m1.pings.n, 1)), atol=1e-12)
     assert CalibrationRecord.from_dict(d).moving_bed_for("pool_m1")[0].tolist() == [0.05, -0.15]

@@ -101,7 +101,7 @@ def test_correct_adds_the_run_bed_back_and_says_so(survey, joint, tmp_path):
     calib = json.loads(path.read_text())
     case = survey[0]
     out = correct_case(case, "asc", as_record(calib))
-    assert "moving_bed_note" in out.attrs and out.attrs["moving_bed_velocity_m_s"] == pytest.approx(
+    assert out.provenance.moving_bed_note and list(out.provenance.moving_bed_velocity_m_s) == pytest.approx(
         joint.moving_bed_velocity_m_s.tolist())
     truth = case.truth.vessel_velocity_m_s
     with_bed = np.nanmean(out.vessel_velocity_m_s[:, :2] - truth[:, :2], axis=0)
