@@ -85,14 +85,14 @@ def correct_case(case: Case, method: str, calibration: CalibrationRecord | None 
         bed, source = _true_bed(case)
     else:
         bed, source = (None, "") if calibration is None else calibration.moving_bed_for(case.name)
-    return result if bed is None else with_moving_bed(result, bed, source)  # None: none applied, so recorded
+    return result if bed is None else with_moving_bed(result, bed, source)  # no bed: the provenance says none applied
 
 
 def heading_corrections_applied(case: Case, calibration: CalibrationRecord | None) -> dict:
     """What a correction did to the headings, as :class:`~adcpdyn.cases.corrected.CorrectionProvenance`
-    fields: the heading misalignment and compass
-    deviation applied to a head sensor's readings (the misalignment holds the magnetic declination,
-    which is not applied again), with the calibration's declination and compass error for the record."""
+    fields: the heading misalignment and compass deviation applied to a head sensor's readings (the
+    misalignment holds the magnetic declination, which is not applied again), with the calibration's
+    declination and compass error for the record."""
     delta = None if calibration is None else calibration.heading_misalignment_rad
     if delta is None or case.attitude.frame != "transducer":
         why = ("no calibration" if calibration is None else
