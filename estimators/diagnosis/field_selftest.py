@@ -12,11 +12,12 @@ import time
 import numpy as np
 
 from ...cases.case import Case
+from ..calibration.record import CalibrationRecord
 from .diagnose import DiagnosisConfig, diagnose
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, has_moving_reference, inject
 
 
-def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig = DiagnosisConfig(),
+def field_selftest(case: Case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
                    sizes: dict | None = None, progress=None) -> dict:
     """Diagnose ``case`` clean and with every field error of ``sizes`` ({error: sizes}, default
     the field's typical ones, :data:`.field_errors.FIELD_ERRORS`) injected, blind.
@@ -157,11 +158,11 @@ def write_field_selftest(res: dict, json_path, fmt: str = "png") -> list:
     import matplotlib.pyplot as plt
 
     from ...cases.atomic import atomic_path
-    from ..calibration import _jsonable
+    from ..calibration.result import jsonable
 
     json_path = Path(json_path)
     with atomic_path(json_path) as tmp, open(tmp, "w") as fh:
-        json.dump(_jsonable(res), fh, indent=2)
+        json.dump(jsonable(res), fh, indent=2)
     md = json_path.with_suffix(".md")
     with atomic_path(md) as tmp:
         Path(tmp).write_text(f"# Field errors injected into {res.get('case', 'the file')}\n\n" + format_field_selftest(res) + "\n")
