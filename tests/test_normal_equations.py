@@ -316,3 +316,12 @@ def test_field_selftest_says_why_an_error_was_not_named():
     assert outcome({**row, "expected": "reference_latency"}, None, result) == "not tried: no reference"
     assert outcome({**row, "hit": True, "verdict": "moving_bed"}, mine, result) == "named"
     assert outcome({"expected": "none", "verdict": "heave", "hit": False}, None, result) == "names heave"
+
+
+def test_an_error_nested_in_the_files_own_effect_is_judged_on_that_effect():
+    from adcpdyn.estimators.diagnosis.field_selftest import carrier
+
+    assert carrier("compass_offset", ["heave", "compass_deviation"]) == "compass_deviation"
+    assert carrier("attitude_latency", ["attitude_latency"]) == "attitude_latency"
+    assert carrier("compass_deviation", ["compass_offset"]) is None  # the smaller cannot carry the larger
+    assert carrier("moving_bed", []) is None

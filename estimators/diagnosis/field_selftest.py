@@ -13,6 +13,7 @@ import numpy as np
 
 from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
+from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, diagnose
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, has_moving_reference, inject
 
@@ -49,14 +50,22 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
             own = tuple(r.selected)
             own_values = {name: next(s for s in r.ranking if s["effect"] == name and s["significant"]) for name in own}
             row["own_effects"] = list(own)
-        elif expected in own:  # the file carries it already: named when its estimate moves significantly its way
-            row.update(_moved(r.given, own_values[expected], *SHIFTED_PARAMETER.get(error, (None, 0.0))))
+        elif carrier(expected, own):  # the file carries it already: named when its estimate moves significantly its way
+            mover = carrier(expected, own)
+            row.update(_moved({k: v for k, v in r.given.items() if k.split("/")[-1].startswith(mover + ".")},
+                              own_values[mover], *SHIFTED_PARAMETER.get(error, (None, 0.0))))
             row["outcome"] = f"own effect, estimate moved {row['shift_z']:.1f} SE" + ("" if row["hit"] else " (not named)")
         rows.append(row)
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
     return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": config.navigation,
             "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+
+
+def carrier(effect: str, own) -> str | None:
+    """The file's own effect that carries ``effect``: itself, or one containing it as a special case
+    (a compass offset is the constant term of a compass deviation)."""
+    return next((o for o in own if o == effect or effect in get_effect(o).nests), None)
 
 
 def outcome(row: dict, mine: dict | None, result) -> str:
