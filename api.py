@@ -4,8 +4,8 @@ Every function here is exported at the package top (``import adcpdyn``) and does
 command of the same name does (``adcpdyn --help``), with the same checks and the same
 numbers: the command line calls these functions. A case can be given as a case file path,
 a :class:`~adcpdyn.cases.case.Case` or an :class:`ImportedCase`; a calibration as a
-CALIB.json path, a :class:`~adcpdyn.estimators.calibration_result.CalibrationResult`, a
-:class:`~adcpdyn.estimators.calibration_record.CalibrationRecord` or a parsed dict.
+CALIB.json path, a :class:`~adcpdyn.estimators.calibration.result.CalibrationResult`, a
+:class:`~adcpdyn.estimators.calibration.record.CalibrationRecord` or a parsed dict.
 
 Verbs that use the attitude (``calibrate``, ``correct``, ``compare``, ``diagnose``) first
 restrict a case to what its attitude record covers, as the command line does
@@ -30,9 +30,9 @@ if TYPE_CHECKING:  # pragma: no cover - names for annotations only
 
     from .cases.case import Case
     from .estimators.asc import Correction
-    from .estimators.calibration import CalibrationConfig
-    from .estimators.calibration_record import CalibrationRecord
-    from .estimators.calibration_result import CalibrationResult
+    from .estimators.calibration.problem import CalibrationConfig
+    from .estimators.calibration.record import CalibrationRecord
+    from .estimators.calibration.result import CalibrationResult
     from .estimators.diagnosis.diagnose import DiagnosisResult
 
 __all__ = ["ImportedCase", "Comparison", "read_case", "import_file", "simulate", "read_calibration", "calibrate", "field_selftest",
@@ -198,17 +198,17 @@ def _keyed(sources: list) -> list:
     return [dataclasses.replace(s, case=s.case.replace(name=Path(s.path).stem)) if s.path else s for s in sources]
 
 
-def _calibration_provenance(calibration) -> dict:
-    """What a correction records of the calibration it was given: file and SHA-256, or that it was in memory."""
+def _calibration_provenance(calibration, record) -> dict:
+    """What a correction records of the calibration it was given (``calibration``, read into
+    ``record``): file and SHA-256, or that it was in memory."""
     from .cases.hashing import sha256_of
 
-    if calibration is None:
+    if record is None:
         return {"calibration_file": "none"}
     if isinstance(calibration, (str, os.PathLike)):
         return {"calibration_file": str(calibration), "calibration_sha256": sha256_of(calibration)}
-    source = getattr(calibration, "source", "") or ""
-    if source and Path(source).is_file():  # a record or a dict read from a file
-        return {"calibration_file": source, "calibration_sha256": sha256_of(source)}
+    if record.source and Path(record.source).is_file():  # a record read from a file
+        return {"calibration_file": record.source, "calibration_sha256": sha256_of(record.source)}
     return {"calibration_file": f"none (a {type(calibration).__name__} in memory, not a file)"}
 
 
@@ -343,7 +343,7 @@ def read_calibration(path) -> "CalibrationRecord":
     ValueError
         One line naming the file and the key.
     """
-    from .estimators.calibration_record import CalibrationRecord
+    from .estimators.calibration.record import CalibrationRecord
 
     return CalibrationRecord.from_json(path)
 
@@ -379,7 +379,7 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
     ValueError
         An unknown option, a bad case, or a problem the calibration refuses (one line).
     """
-    from .estimators.calibration import CalibrationConfig, CalibrationProblem
+    from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     config = config or CalibrationConfig()
     known = {f.name for f in dataclasses.fields(CalibrationConfig)}
@@ -439,9 +439,10 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     Returns
     -------
     Correction
-        ``vessel_velocity_m_s`` (N, 3) NED, ``water_velocity_m_s`` (N, K, 3) or None, ``attrs``:
-        what was applied (heading misalignment, declination, moving bed, calibration file and
-        SHA-256, source case and SHA-256, warnings).
+        ``vessel_velocity_m_s`` (N, 3) NED, ``water_velocity_m_s`` (N, K, 3) or None,
+        ``provenance`` (:class:`~adcpdyn.cases.corrected.CorrectionProvenance`): what was applied
+        (heading misalignment, declination, moving bed, calibrated and entered transducer depth,
+        calibration file and SHA-256, source case and SHA-256, warnings).
 
     Raises
     ------
@@ -449,7 +450,7 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         One line naming the argument or field.
     """
     from .cases.hashing import sha256_of
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run, correct_case
 
     _choice("method", method, CORRECTION_METHODS)
@@ -464,18 +465,15 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         from .cases.atomic import check_output_file
 
         check_output_file(out, *[p for p in (case, calibration) if isinstance(p, (str, os.PathLike))], option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     src, notes = _prepared(_source(case))
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
-    result = correct_case(c, method, cal, timing, reference)
-    if notes:
-        result.attrs["warnings"] = notes
-    result.attrs.update(_calibration_provenance(calibration))
-    if cal is not None and cal.get("provenance"):
-        result.attrs["calibration_provenance"] = cal["provenance"]
-    result.attrs.update(source_case_name=c.name, source_case_file=src.path,
-                        source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
+    result = correct_case(c, method, cal, timing, reference).with_provenance(
+        warnings=tuple(notes), **_calibration_provenance(calibration, cal),
+        calibration_provenance=(cal.provenance or None) if cal is not None else None,
+        source_case_name=c.name, source_case_file=src.path,
+        source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
     if out is not None:
         _write_correction(dataclasses.replace(src, case=c), result, out, calibration, history, attribution)
     return result
@@ -524,7 +522,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     import json
 
     from .cases.coverage import reference_at
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run, correct_case
     from .estimators.metrics import velocity_metrics
 
@@ -533,7 +531,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
         from .cases.atomic import check_output_folder
 
         check_output_folder(out, option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     src, notes = _prepared(_source(case))
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
@@ -557,13 +555,13 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     comparison = Comparison(c.name, label, table, results, not_run, notes)
     if out is not None:
         from .cases.atomic import atomic_path
-        from .estimators.calibration import _jsonable
+        from .estimators.calibration.result import jsonable
         from .plots import velocity_figure
 
         folder = Path(out)
         table_path, figure_path = folder / f"{c.name}_compare.json", folder / f"{c.name}_compare.{fmt}"
         with atomic_path(table_path) as tmp, open(tmp, "w") as fh:
-            json.dump(_jsonable({**table, "against": label, "not_run": not_run, "warnings": notes}), fh, indent=2)
+            json.dump(jsonable({**table, "against": label, "not_run": not_run, "warnings": notes}), fh, indent=2)
         legend = "truth" if label == "truth" else "reference (at rest)" if c.reference.stationary else "GNSS"
         velocity_figure(c.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, ref,
                         f"{c.name}: corrections against {comparison.against_text}", figure_path, reference_label=legend)
@@ -616,7 +614,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     ValueError
         Too few pings, no attitude, an unknown effect or option (one line).
     """
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
@@ -629,7 +627,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         from .cases.atomic import check_output_file
 
         check_output_file(out, *[p for p in [*items, calibration] if isinstance(p, (str, os.PathLike))], option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     prepared = [_prepared(_source(c, "cases")) for c in items]
     notes = [n for _, ns in prepared for n in ns]
     sources = []
@@ -683,7 +681,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         ``rows`` (per run: error, size, verdict, named or not, shrink, estimate, gap) and
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
@@ -697,7 +695,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
     if calibration is None:
         calibration = calibrate(src.case, n_starts=8)
         note = "calibrated on itself (8 starts): no --calibration given"
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     run, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
     config = _diagnosis_config(effects, attitude, navigation)

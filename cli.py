@@ -214,8 +214,8 @@ from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
 def _load_calibration(path):
-    """The validated CALIB.json of --calibration (None without one)."""
-    from .estimators.calibration_file import read_calibration
+    """The --calibration CALIB.json read, validated and typed (None without one)."""
+    from .api import read_calibration
 
     return None if path is None else read_calibration(path)
 
@@ -289,7 +289,7 @@ def cmd_correct(args) -> int:
     result = correct(args.case, args.method, args.calibration, timing=args.timing, reference=args.reference,
                      out=args.out, history=command, accept_other_instrument=args.accept_other_instrument,
                      attribution=args.attribution)
-    for w in result.attrs.get("warnings", []):
+    for w in result.provenance.warnings:
         print(f"warning: {w}")
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
@@ -299,10 +299,11 @@ def cmd_correct(args) -> int:
     if result.water_velocity_m_s is not None:
         w = result.water_velocity_m_s
         print(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
-              f"referenced to {'the bottom track' if result.attrs.get('water_reference') == 'bt' else 'the GNSS'}")
-    for key in ("installation_note", "moving_bed_note"):
-        if result.attrs.get(key):
-            print(f"{'note' if key == 'moving_bed_note' else 'warning'}: {result.attrs[key]}")
+              f"referenced to {'the bottom track' if result.provenance.water_reference == 'bt' else 'the GNSS'}")
+    if result.provenance.installation_note:
+        print(f"warning: {result.provenance.installation_note}")
+    if result.provenance.moving_bed_note:
+        print(f"note: {result.provenance.moving_bed_note}")
     return 0
 
 
@@ -348,7 +349,7 @@ def cmd_compare(args) -> int:
 
 
 def _calibration_config(args, formulation=None):
-    from .estimators.calibration import CalibrationConfig
+    from .estimators.calibration.problem import CalibrationConfig
 
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
@@ -468,7 +469,7 @@ def cmd_demo(args) -> int:
     from .cases.io import write_case
     from .cases.scenario import get_scenario
     from .cases.summary import summarise
-    from .estimators.calibration import CalibrationConfig, CalibrationProblem
+    from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
     from .estimators.evaluation import calibration_errors
     from .estimators.metrics import format_table, velocity_metrics
     from .models.rotations import euler_matrix
@@ -599,7 +600,7 @@ def _diagnose_selftest(args) -> int:
     from tqdm import tqdm
 
     from .cases.atomic import atomic_path, check_output_file
-    from .estimators.calibration import _jsonable
+    from .estimators.calibration.result import jsonable
     from .api import _diagnosis_config
     from .estimators.diagnosis.selftest import draw_cases, format_summary, run_one, summarise
 
@@ -619,7 +620,7 @@ def _diagnose_selftest(args) -> int:
     if args.out:
         with atomic_path(args.out) as tmp:
             with open(tmp, "w") as fh:
-                json.dump(_jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
+                json.dump(jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
                                      "calibrated": args.selftest_calibrated,
                                      "config": {"effects": list(config.effects), "bic_margin": config.bic_margin,
                                                 "min_shrink": config.min_shrink, "gap_z": config.gap_z,

@@ -20,7 +20,7 @@ SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "surv
 
 
 def _calibrate(case, **kw):
-    from ..estimators.calibration import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     tic = time.perf_counter()
     r = CalibrationProblem(case, CalibrationConfig(**kw)).solve()
@@ -171,6 +171,7 @@ def bench_correction(sizes) -> dict:
     from ..estimators.adc import dynamic_correction
     from ..estimators.asc import asc
     from ..estimators.attitude_fit import fit_attitude
+    from ..estimators.calibration.record import CalibrationRecord
     from ..models.rotations import euler_matrix
     from ..cases.simulation import simulate
     from ..solvers.rootfinder import RootfinderOptions
@@ -178,7 +179,8 @@ def bench_correction(sizes) -> dict:
     base = simulate(get_scenario("pool_m1"), seed=1)
     attitude = fit_attitude(base).params
     t = base.truth
-    calib = {"radius_vectors_head_m": (t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))).tolist()}
+    calib = CalibrationRecord.from_dict(
+        {"radius_vectors_head_m": (t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))).tolist()})
     variants = {"rootfinder": RootfinderOptions(compile="always"),
                 "rootfinder_interpreted": RootfinderOptions(compile="never")}
     tic = time.perf_counter()  # builds and compiles the per-ping solve (once per attitude-model layout)

@@ -175,8 +175,10 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     data["sea_floor_depth"] = (("time",), case.environment.depth_at_pings(N), {
         "standard_name": "sea_floor_depth_below_sea_surface", "units": "m", "positive": "down",
         "long_name": "depth of the bed below the surface under each ping (bottom track)"})
-    calibrated = None if correction is None else correction.attrs.get("transducer_depth_calibrated_m")
-    data[ADCP] = _instrument_variable(case, calibrated)
+    applied = None if correction is None else correction.provenance
+    calibrated = None if applied is None else applied.transducer_depth_calibrated_m
+    entered = None if applied is None else applied.transducer_depth_entered_m  # None in files written before it was
+    data[ADCP] = _instrument_variable(case, calibrated, entered)  # recorded: the case's
     if case.water is not None:
         coords["depth"] = ("depth", np.asarray(case.water.cell_depth_m, dtype=np.float64), {
             "standard_name": "depth", "long_name": "depth of the cell centre below the surface", "units": "m",
@@ -208,10 +210,11 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     return describe(ds, case, provenance, as_attribution(attribution))
 
 
-def _instrument_variable(case: Case, calibrated_depth_m) -> tuple:
-    """The ADCP as a container variable (IOOS-1.2): what it is and how deep its transducer sat."""
+def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None) -> tuple:
+    """The ADCP as a container variable (IOOS-1.2): what it is and how deep its transducer sat (as calibrated
+    and used by a correction, and as entered; the case's when the entered depth is not recorded)."""
     ins = case.instrument
-    entered = float(case.environment.transducer_depth_m)
+    entered = float(case.environment.transducer_depth_m if entered_depth_m is None else entered_depth_m)
     attrs = {"long_name": "the ADCP (a container variable: its value means nothing)",
              "make_model": " ".join(x for x in (ins.make, ins.model) if x) or "not recorded",
              "serial_number": ins.serial_number or "not recorded", "frequency_hz": float(ins.frequency_hz),
@@ -360,12 +363,12 @@ def _correction_variables(case, correction, data: dict, attrs: dict) -> None:
     t = np.asarray(correction.time_s, dtype=np.float64)
     if t.shape != case.pings.time_s.shape or np.any(np.abs(t - case.pings.time_s) > 1e-9):
         raise ValueError(f"correction: time_s: expected the case's {case.pings.n} ping times, got {t.size} other times")
-    s = correction.attrs
+    s = correction.provenance
     method = correction.method
-    north_ref = ("true north (heading misalignment applied)" if s.get("heading_misalignment_applied_rad") is not None
+    north_ref = ("true north (heading misalignment applied)" if s.heading_misalignment_applied_rad is not None
                  else "the compass's north (no heading correction applied)")
     east, north, up = _enu(correction.vessel_velocity_m_s)
-    bed = s.get("moving_bed_velocity_m_s") is not None
+    bed = s.moving_bed_velocity_m_s is not None
     over = "over ground" if bed else "over the bed (taken as fixed)"
     point = "the transducer (static correction: rotation ignored)" if method == "asc" else "the centre of rotation G"
     vc = {"units": "m s-1", "comment": f"method {method}, velocity of {point}; north: {north_ref}",
@@ -385,8 +388,8 @@ def _correction_variables(case, correction, data: dict, attrs: dict) -> None:
         "standard_name": "number_of_observations", "units": "1",
         "long_name": "number of beams in the bottom-track solution"})
     if correction.water_velocity_m_s is not None and "depth" in _dims_of(data):
-        reference = s.get("water_reference", "bt")
-        note = s.get("water_reference_note", "")
+        reference = s.water_reference or "bt"
+        note = s.water_reference_note
         wc = {"units": "m s-1", "comment": f"method {method}; {note}; north: {north_ref}"}
         for j, (std, word) in enumerate((("eastward_sea_water_velocity", "east"),
                                          ("northward_sea_water_velocity", "north"),
@@ -409,19 +412,19 @@ def _correction_variables(case, correction, data: dict, attrs: dict) -> None:
         attrs["water_reference"] = reference
     attrs["processing_method"] = method
     attrs["north_reference"] = north_ref
-    attrs["calibration_file"] = str(s.get("calibration_file", "none"))
-    if "calibration_sha256" in s:
-        attrs["calibration_sha256"] = s["calibration_sha256"]
-    heading = s.get("heading_misalignment_applied_rad")
-    attrs["heading_correction"] = (s.get("heading_correction_note", "none recorded") if heading is None else
+    attrs["calibration_file"] = str(s.calibration_file)
+    if s.calibration_sha256 is not None:
+        attrs["calibration_sha256"] = s.calibration_sha256
+    heading = s.heading_misalignment_applied_rad
+    attrs["heading_correction"] = (s.heading_correction_note or "none recorded" if heading is None else
                                    f"heading misalignment {np.rad2deg(heading):+.4f} deg applied to the recorded "
                                    "headings (holds the magnetic declination)")
     attrs["heading_misalignment_deg"] = NOT_DETERMINED if heading is None else float(np.rad2deg(heading))
-    decl = s.get("magnetic_declination_rad")
+    decl = s.magnetic_declination_rad
     attrs["magnetic_declination_deg"] = NOT_DETERMINED if decl is None else float(np.rad2deg(decl))
-    bed = s.get("moving_bed_velocity_m_s")
+    bed = s.moving_bed_velocity_m_s
     attrs["moving_bed_velocity_north_east_m_s"] = "none applied" if bed is None else json.dumps(list(bed))
-    attrs["corrections_applied"] = json.dumps({k: _jsonable(v) for k, v in s.items()}, default=_jsonable)
+    attrs["corrections_applied"] = json.dumps(s.to_settings(), default=_jsonable)
 
 
 def _dims_of(data: dict) -> set:
@@ -458,7 +461,7 @@ def correction_from_file(path):
     source = source.decode() if isinstance(source, bytes) else str(source)
     corr = Correction(method=str(d["method"]), time_s=d["time_s"], vessel_velocity_m_s=d["vessel_velocity_m_s"],
                       error_velocity_m_s=d["error_velocity_m_s"], beams_used=d["beams_used"],
-                      water_velocity_m_s=d.get("water_velocity_m_s"), attrs=d["settings"],
+                      water_velocity_m_s=d.get("water_velocity_m_s"), provenance=d["provenance"],
                       water_relative_velocity_m_s=d.get("water_relative_velocity_m_s"))
     return corr, source
 

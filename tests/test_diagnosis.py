@@ -219,7 +219,7 @@ def test_calibrated_selftest_diagnoses_with_the_platforms_own_calibration(monkey
     params = get_effect("heave").draw(np.random.default_rng(3))
     row = selftest.run_one("heave", params, 5, "pool", config, calibrated=True)
     assert row["calibrated"] and seen["calibration"] is not None
-    assert [r["case"] for r in seen["calibration"]["runs"]] == [seen["case"] + "_calibration"]
+    assert [r.case for r in seen["calibration"].runs] == [seen["case"] + "_calibration"]
     assert row["verdict"] == "heave"
 
 

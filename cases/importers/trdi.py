@@ -280,7 +280,10 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
     if inside.sum() < gnss.MIN_FIXES:
         attrs["/provenance"]["gnss"] = f"none: {int(inside.sum())} GNSS velocities inside the selected pings"
         return case, attrs
-    case = case.replace(reference=Reference(time_s=t_ref[inside], velocity_m_s=vel, point_body_m=np.zeros(3)))
+    window = track.window_s[inside] - offset - t_abs[0]
+    averaged = bool(np.all(window[:, 1] > window[:, 0]))  # differenced positions: each velocity a mean over its fixes
+    case = case.replace(reference=Reference(time_s=t_ref[inside], velocity_m_s=vel, point_body_m=np.zeros(3),
+                                            window_s=window if averaged else None))
     attrs["/provenance"].update({
         "gnss": f"{track.source}: {track.n_fixes} GGA fixes; velocity from {track.velocity_from}",
         "clock_offset_s": offset, "clock_offset_coarse_s": coarse,
@@ -294,5 +297,8 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
         "source": "GNSS over ground, Earth frame (N, E, D), time on the ADCP clock (GNSS UTC - clock_offset_s)",
         "vertical_velocity": "0 (surface vessel; GNSS vertical not used)",
         "point_body_source": "antenna position not in the file: zeros (taken at G)",
+        "window": ("window_s: the interval between the two GGA fixes each velocity is differenced from (the velocity is "
+                   "the mean over it, stamped at its middle)" if averaged else
+                   "none: VTG velocities, instantaneous at their time stamps"),
     }
     return case, attrs
