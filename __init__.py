@@ -38,9 +38,9 @@ except _NotInstalled:  # run from a source tree that was never installed
 # types, imported when first used (PEP 562)
 _LAZY = {
     "Case": ".cases.case",
-    "CalibrationConfig": ".estimators.calibration",
-    "CalibrationResult": ".estimators.calibration_result",
-    "CalibrationRecord": ".estimators.calibration_record",
+    "CalibrationConfig": ".estimators.calibration.problem",
+    "CalibrationResult": ".estimators.calibration.result",
+    "CalibrationRecord": ".estimators.calibration.record",
     "Correction": ".estimators.asc",
     "DiagnosisResult": ".estimators.diagnosis.diagnose",
 }

@@ -4,8 +4,8 @@ Every function here is exported at the package top (``import adcpdyn``) and does
 command of the same name does (``adcpdyn --help``), with the same checks and the same
 numbers: the command line calls these functions. A case can be given as a case file path,
 a :class:`~adcpdyn.cases.case.Case` or an :class:`ImportedCase`; a calibration as a
-CALIB.json path, a :class:`~adcpdyn.estimators.calibration_result.CalibrationResult`, a
-:class:`~adcpdyn.estimators.calibration_record.CalibrationRecord` or a parsed dict.
+CALIB.json path, a :class:`~adcpdyn.estimators.calibration.result.CalibrationResult`, a
+:class:`~adcpdyn.estimators.calibration.record.CalibrationRecord` or a parsed dict.
 
 Verbs that use the attitude (``calibrate``, ``correct``, ``compare``, ``diagnose``) first
 restrict a case to what its attitude record covers, as the command line does
@@ -30,9 +30,9 @@ if TYPE_CHECKING:  # pragma: no cover - names for annotations only
 
     from .cases.case import Case
     from .estimators.asc import Correction
-    from .estimators.calibration import CalibrationConfig
-    from .estimators.calibration_record import CalibrationRecord
-    from .estimators.calibration_result import CalibrationResult
+    from .estimators.calibration.problem import CalibrationConfig
+    from .estimators.calibration.record import CalibrationRecord
+    from .estimators.calibration.result import CalibrationResult
     from .estimators.diagnosis.diagnose import DiagnosisResult
 
 __all__ = ["ImportedCase", "Comparison", "read_case", "import_file", "simulate", "read_calibration", "calibrate", "field_selftest",
@@ -198,17 +198,17 @@ def _keyed(sources: list) -> list:
     return [dataclasses.replace(s, case=s.case.replace(name=Path(s.path).stem)) if s.path else s for s in sources]
 
 
-def _calibration_provenance(calibration) -> dict:
-    """What a correction records of the calibration it was given: file and SHA-256, or that it was in memory."""
+def _calibration_provenance(calibration, record) -> dict:
+    """What a correction records of the calibration it was given (``calibration``, read into
+    ``record``): file and SHA-256, or that it was in memory."""
     from .cases.hashing import sha256_of
 
-    if calibration is None:
+    if record is None:
         return {"calibration_file": "none"}
     if isinstance(calibration, (str, os.PathLike)):
         return {"calibration_file": str(calibration), "calibration_sha256": sha256_of(calibration)}
-    source = getattr(calibration, "source", "") or ""
-    if source and Path(source).is_file():  # a record or a dict read from a file
-        return {"calibration_file": source, "calibration_sha256": sha256_of(source)}
+    if record.source and Path(record.source).is_file():  # a record read from a file
+        return {"calibration_file": record.source, "calibration_sha256": sha256_of(record.source)}
     return {"calibration_file": f"none (a {type(calibration).__name__} in memory, not a file)"}
 
 
@@ -343,7 +343,7 @@ def read_calibration(path) -> "CalibrationRecord":
     ValueError
         One line naming the file and the key.
     """
-    from .estimators.calibration_record import CalibrationRecord
+    from .estimators.calibration.record import CalibrationRecord
 
     return CalibrationRecord.from_json(path)
 
@@ -379,7 +379,7 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
     ValueError
         An unknown option, a bad case, or a problem the calibration refuses (one line).
     """
-    from .estimators.calibration import CalibrationConfig, CalibrationProblem
+    from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     config = config or CalibrationConfig()
     known = {f.name for f in dataclasses.fields(CalibrationConfig)}
@@ -411,7 +411,8 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
 
 # ----------------------------------------------------------------------------------------------- correct
 def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep", reference: str = "bt",
-            out=None, history: str | None = None, accept_other_instrument: bool = False) -> "Correction":
+            out=None, history: str | None = None, accept_other_instrument: bool = False,
+            attribution=None) -> "Correction":
     """Correct every ping of a case: vessel velocity (bottom track) and water profile.
 
     Parameters
@@ -432,13 +433,16 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         What produced it (the netCDF ``history`` attribute).
     accept_other_instrument : bool
         Apply a calibration whose CALIB.json names another instrument (refused by default).
+    attribution : str, os.PathLike or Attribution, optional
+        With ``out=OUT.nc``: who made and distributes the data (:func:`to_xarray`).
 
     Returns
     -------
     Correction
-        ``vessel_velocity_m_s`` (N, 3) NED, ``water_velocity_m_s`` (N, K, 3) or None, ``attrs``:
-        what was applied (heading misalignment, declination, moving bed, calibration file and
-        SHA-256, source case and SHA-256, warnings).
+        ``vessel_velocity_m_s`` (N, 3) NED, ``water_velocity_m_s`` (N, K, 3) or None,
+        ``provenance`` (:class:`~adcpdyn.cases.corrected.CorrectionProvenance`): what was applied
+        (heading misalignment, declination, moving bed, calibrated and entered transducer depth,
+        calibration file and SHA-256, source case and SHA-256, warnings).
 
     Raises
     ------
@@ -446,34 +450,36 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
         One line naming the argument or field.
     """
     from .cases.hashing import sha256_of
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run, correct_case
 
     _choice("method", method, CORRECTION_METHODS)
     _choice("timing", timing, TIMINGS)
     _choice("reference", reference, REFERENCES)
+    if attribution is not None and (out is None or Path(out).suffix.lower() != ".nc"):
+        raise ValueError(f"attribution: only with out=OUT.nc (netCDF), got out={None if out is None else str(out)!r}")
+    from .cases.attribution import as_attribution
+
+    attribution = as_attribution(attribution)  # a bad file fails before the work
     if out is not None:
         from .cases.atomic import check_output_file
 
         check_output_file(out, *[p for p in (case, calibration) if isinstance(p, (str, os.PathLike))], option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     src, notes = _prepared(_source(case))
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
-    result = correct_case(c, method, cal, timing, reference)
-    if notes:
-        result.attrs["warnings"] = notes
-    result.attrs.update(_calibration_provenance(calibration))
-    if cal is not None and cal.get("provenance"):
-        result.attrs["calibration_provenance"] = cal["provenance"]
-    result.attrs.update(source_case_name=c.name, source_case_file=src.path,
-                        source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
+    result = correct_case(c, method, cal, timing, reference).with_provenance(
+        warnings=tuple(notes), **_calibration_provenance(calibration, cal),
+        calibration_provenance=(cal.provenance or None) if cal is not None else None,
+        source_case_name=c.name, source_case_file=src.path,
+        source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
     if out is not None:
-        _write_correction(dataclasses.replace(src, case=c), result, out, calibration, history)
+        _write_correction(dataclasses.replace(src, case=c), result, out, calibration, history, attribution)
     return result
 
 
-def _write_correction(src: _Source, result, out, calibration, history) -> None:
+def _write_correction(src: _Source, result, out, calibration, history, attribution=None) -> None:
     if Path(out).suffix.lower() != ".nc":
         from .cases.corrected import write_correction
 
@@ -482,7 +488,8 @@ def _write_correction(src: _Source, result, out, calibration, history) -> None:
     from .cases.netcdf import to_xarray as _to_xarray
     from .cases.netcdf import write_netcdf
 
-    ds = _to_xarray(src.case, result, provenance=src.provenance, source_case_path=src.path, history=history)
+    ds = _to_xarray(src.case, result, provenance=src.provenance, source_case_path=src.path, history=history,
+                    attribution=attribution)
     inputs = [p for p in (src.path, calibration) if isinstance(p, (str, os.PathLike))]
     write_netcdf(ds, out, *inputs)
 
@@ -515,7 +522,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     import json
 
     from .cases.coverage import reference_at
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run, correct_case
     from .estimators.metrics import velocity_metrics
 
@@ -524,7 +531,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
         from .cases.atomic import check_output_folder
 
         check_output_folder(out, option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     src, notes = _prepared(_source(case))
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
@@ -548,13 +555,13 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     comparison = Comparison(c.name, label, table, results, not_run, notes)
     if out is not None:
         from .cases.atomic import atomic_path
-        from .estimators.calibration import _jsonable
+        from .estimators.calibration.result import jsonable
         from .plots import velocity_figure
 
         folder = Path(out)
         table_path, figure_path = folder / f"{c.name}_compare.json", folder / f"{c.name}_compare.{fmt}"
         with atomic_path(table_path) as tmp, open(tmp, "w") as fh:
-            json.dump(_jsonable({**table, "against": label, "not_run": not_run, "warnings": notes}), fh, indent=2)
+            json.dump(jsonable({**table, "against": label, "not_run": not_run, "warnings": notes}), fh, indent=2)
         legend = "truth" if label == "truth" else "reference (at rest)" if c.reference.stationary else "GNSS"
         velocity_figure(c.pings.time_s, {m: r.vessel_velocity_m_s for m, r in results.items()}, ref,
                         f"{c.name}: corrections against {comparison.against_text}", figure_path, reference_label=legend)
@@ -607,7 +614,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     ValueError
         Too few pings, no attitude, an unknown effect or option (one line).
     """
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
@@ -620,7 +627,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         from .cases.atomic import check_output_file
 
         check_output_file(out, *[p for p in [*items, calibration] if isinstance(p, (str, os.PathLike))], option="out")
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     prepared = [_prepared(_source(c, "cases")) for c in items]
     notes = [n for _, ns in prepared for n in ns]
     sources = []
@@ -674,7 +681,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         ``rows`` (per run: error, size, verdict, named or not, shrink, estimate, gap) and
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
-    from .estimators.calibration_record import calibration_dict
+    from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
@@ -688,7 +695,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
     if calibration is None:
         calibration = calibrate(src.case, n_starts=8)
         note = "calibrated on itself (8 starts): no --calibration given"
-    cal = calibration_dict(calibration)
+    cal = as_record(calibration)
     run, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
     config = _diagnosis_config(effects, attitude, navigation)
@@ -700,7 +707,8 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
 
 
 # ----------------------------------------------------------------------------------------------- export
-def to_xarray(case, correction: "Correction | None" = None, *, history: str | None = None) -> "xarray.Dataset":
+def to_xarray(case, correction: "Correction | None" = None, *, history: str | None = None,
+              attribution=None) -> "xarray.Dataset":
     """A case, and optionally a correction of it, as a CF-1.8 :class:`xarray.Dataset`.
 
     Parameters
@@ -710,14 +718,19 @@ def to_xarray(case, correction: "Correction | None" = None, *, history: str | No
         The result of :func:`correct` on this case.
     history : str, optional
         What produced it, for the ``history`` attribute.
+    attribution : str, os.PathLike or Attribution, optional
+        Who made and distributes the data: creator, publisher, institution, licence, naming
+        authority (ACDD-1.3, IOOS-1.2), as a TOML file of those attributes or an
+        :class:`~adcpdyn.cases.attribution.Attribution`; ``not stated`` without it.
 
     Returns
     -------
     xarray.Dataset
-        ENU velocities, UTC ``time`` (when the case has a UTC origin), dims ``time``,
-        ``depth``, ``beam``; provenance attributes (adcpdyn version, source case and
-        instrument file with SHA-256, method, calibration file, heading misalignment,
-        declination, moving bed).
+        ENU velocities, UTC ``time`` (when the case has a UTC origin; else the pings'
+        coordinate is ``case_time``), dims ``beam``, ``time``, ``depth``; CF trajectoryProfile
+        with positions and dates, ACDD-1.3 and IOOS-1.2 attributes; provenance attributes
+        (adcpdyn version, source case and instrument file by absolute path with SHA-256,
+        method, calibration file, heading misalignment, declination, moving bed).
 
     Raises
     ------
@@ -731,10 +744,12 @@ def to_xarray(case, correction: "Correction | None" = None, *, history: str | No
         from .cases.coverage import restrict_to_coverage
 
         src = dataclasses.replace(src, case=restrict_to_coverage(src.case, source=src.path or src.case.name)[0])
-    return _to_xarray(src.case, correction, provenance=src.provenance, source_case_path=src.path, history=history)
+    return _to_xarray(src.case, correction, provenance=src.provenance, source_case_path=src.path, history=history,
+                      attribution=attribution)
 
 
-def export(case, out, correction: "Correction | None" = None, *, history: str | None = None) -> Path:
+def export(case, out, correction: "Correction | None" = None, *, history: str | None = None,
+           attribution=None) -> Path:
     """Write a case (and optionally a correction of it) as CF-1.8 netCDF (h5netcdf engine).
 
     Parameters
@@ -744,6 +759,8 @@ def export(case, out, correction: "Correction | None" = None, *, history: str | 
         ``OUT.nc``, written atomically with the permissions of the process umask; never an input.
     correction : Correction, optional
     history : str, optional
+    attribution : str, os.PathLike or Attribution, optional
+        Who made and distributes the data (:func:`to_xarray`).
 
     Returns
     -------
@@ -762,6 +779,6 @@ def export(case, out, correction: "Correction | None" = None, *, history: str | 
         raise ValueError(f"out: expected a netCDF file name ending in .nc, got {str(out)!r}")
     inputs = [case] if isinstance(case, (str, os.PathLike)) else []
     check_output_file(out, *inputs, option="out")
-    ds = to_xarray(case, correction, history=history or "adcpdyn.export")
+    ds = to_xarray(case, correction, history=history or "adcpdyn.export", attribution=attribution)
     write_netcdf(ds, out, *inputs)
     return Path(out)

@@ -15,7 +15,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from .estimators.calibration import CalibrationConfig
+from .estimators.calibration.problem import CalibrationConfig
 
 LOCAL, SERIAL, AUTO = "local", "none", "auto"
 IN_PROCESS_MAX_JOBS = 2  # auto: a LocalCluster costs seconds to start; one or two cases run here
@@ -65,7 +65,7 @@ def _correct(job: CorrectJob) -> dict:
     result = correct(job.case_path, job.method, job.calibration_path, timing=job.timing, reference=job.reference,
                      accept_other_instrument=job.accept_other_instrument)
     write_correction(result, job.out_path, source_case=job.case_path)  # the folder is made by the first write
-    notes = result.attrs.get("warnings", [])
+    notes = list(result.provenance.warnings)
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
     return {"success": True, "method": result.method, "pings": len(v),
@@ -167,8 +167,8 @@ def run_batch(jobs, scheduler: str = AUTO, n_workers: int | None = None, progres
 def write_summary(rows: list[dict], path) -> None:
     """The batch's summaries as JSON, atomically."""
     from .cases.atomic import atomic_path
-    from .estimators.calibration import _jsonable
+    from .estimators.calibration.result import jsonable
 
     with atomic_path(path) as tmp:
         with open(tmp, "w") as fh:
-            json.dump(_jsonable(rows), fh, indent=2)
+            json.dump(jsonable(rows), fh, indent=2)

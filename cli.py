@@ -214,8 +214,8 @@ from .estimators.correct_case import correct_case as _correct  # noqa: E402
 
 
 def _load_calibration(path):
-    """The validated CALIB.json of --calibration (None without one)."""
-    from .estimators.calibration_file import read_calibration
+    """The --calibration CALIB.json read, validated and typed (None without one)."""
+    from .api import read_calibration
 
     return None if path is None else read_calibration(path)
 
@@ -264,6 +264,8 @@ def cmd_correct(args) -> int:
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
 
+    if args.attribution and (is_many(args.case) or Path(args.out).suffix.lower() != ".nc"):
+        raise ValueError(f"--attribution: only with one case and --out OUT.nc (netCDF), got --out {args.out}")
     if is_many(args.case):
         from .batch import CorrectJob, check_scheduler
 
@@ -282,10 +284,12 @@ def cmd_correct(args) -> int:
         raise ValueError(f"--out: expected OUT.h5 (the corrected file) or OUT.nc (CF netCDF), got {args.out!r}")
     check_output_file(args.out, args.case, args.calibration)
     command = (f"adcpdyn correct {args.case} --method {args.method} --timing {args.timing} --reference {args.reference}"
-               + (f" --calibration {args.calibration}" if args.calibration else "") + f" --out {args.out}")
+               + (f" --calibration {args.calibration}" if args.calibration else "")
+               + (f" --attribution {args.attribution}" if args.attribution else "") + f" --out {args.out}")
     result = correct(args.case, args.method, args.calibration, timing=args.timing, reference=args.reference,
-                     out=args.out, history=command, accept_other_instrument=args.accept_other_instrument)
-    for w in result.attrs.get("warnings", []):
+                     out=args.out, history=command, accept_other_instrument=args.accept_other_instrument,
+                     attribution=args.attribution)
+    for w in result.provenance.warnings:
         print(f"warning: {w}")
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
@@ -295,27 +299,32 @@ def cmd_correct(args) -> int:
     if result.water_velocity_m_s is not None:
         w = result.water_velocity_m_s
         print(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
-              f"referenced to {'the bottom track' if result.attrs.get('water_reference') == 'bt' else 'the GNSS'}")
-    for key in ("installation_note", "moving_bed_note"):
-        if result.attrs.get(key):
-            print(f"{'note' if key == 'moving_bed_note' else 'warning'}: {result.attrs[key]}")
+              f"referenced to {'the bottom track' if result.provenance.water_reference == 'bt' else 'the GNSS'}")
+    if result.provenance.installation_note:
+        print(f"warning: {result.provenance.installation_note}")
+    if result.provenance.moving_bed_note:
+        print(f"note: {result.provenance.moving_bed_note}")
     return 0
 
 
 def cmd_export(args) -> int:
-    """A case, or a corrected file with its case, as CF-1.8 netCDF (xarray, h5netcdf)."""
+    """A case, or a corrected file with its case, as CF-1.8 / ACDD-1.3 / IOOS-1.2 netCDF (xarray, h5netcdf)."""
     from .cases.atomic import check_output_file
     from .cases.netcdf import export_file
 
     if Path(args.out).suffix.lower() != ".nc":
         raise ValueError(f"--out: expected a netCDF file name ending in .nc, got {args.out!r}")
     check_output_file(args.out, args.input, args.case)
-    ds = export_file(args.input, args.out, case_path=args.case, history="adcpdyn export " + " ".join(
-        [args.input, "--out", args.out] + (["--case", args.case] if args.case else [])))
+    ds = export_file(args.input, args.out, case_path=args.case, attribution=args.attribution,
+                     history="adcpdyn export " + " ".join([args.input, "--out", args.out]
+                                                          + (["--case", args.case] if args.case else [])
+                                                          + (["--attribution", args.attribution] if args.attribution
+                                                             else [])))
     what = f"method {ds.attrs['processing_method']}, " if "processing_method" in ds.attrs else ""
     water = f"{ds.sizes['depth']} cells, " if "depth" in ds.sizes else "no water profile, "
-    print(f"wrote {args.out}: {what}{ds.sizes['time']} pings, {water}time "
-          f"{'UTC' if ds['time'].dtype.kind == 'M' else 'in case-clock seconds (no UTC origin)'}, CF-1.8 (h5netcdf)")
+    dated = "time" in ds.coords
+    print(f"wrote {args.out}: {what}{ds['case_time'].size} pings, {water}time "
+          f"{'UTC' if dated else 'in case-clock seconds (no UTC origin)'}, {ds.attrs['Conventions']} (h5netcdf)")
     return 0
 
 
@@ -340,7 +349,7 @@ def cmd_compare(args) -> int:
 
 
 def _calibration_config(args, formulation=None):
-    from .estimators.calibration import CalibrationConfig
+    from .estimators.calibration.problem import CalibrationConfig
 
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
@@ -460,7 +469,7 @@ def cmd_demo(args) -> int:
     from .cases.io import write_case
     from .cases.scenario import get_scenario
     from .cases.summary import summarise
-    from .estimators.calibration import CalibrationConfig, CalibrationProblem
+    from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
     from .estimators.evaluation import calibration_errors
     from .estimators.metrics import format_table, velocity_metrics
     from .models.rotations import euler_matrix
@@ -591,7 +600,7 @@ def _diagnose_selftest(args) -> int:
     from tqdm import tqdm
 
     from .cases.atomic import atomic_path, check_output_file
-    from .estimators.calibration import _jsonable
+    from .estimators.calibration.result import jsonable
     from .api import _diagnosis_config
     from .estimators.diagnosis.selftest import draw_cases, format_summary, run_one, summarise
 
@@ -611,7 +620,7 @@ def _diagnose_selftest(args) -> int:
     if args.out:
         with atomic_path(args.out) as tmp:
             with open(tmp, "w") as fh:
-                json.dump(_jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
+                json.dump(jsonable({"seed": args.seed, "n": args.selftest, "platforms": platforms or "all",
                                      "calibrated": args.selftest_calibrated,
                                      "config": {"effects": list(config.effects), "bic_margin": config.bic_margin,
                                                 "min_shrink": config.min_shrink, "gap_z": config.gap_z,
@@ -701,6 +710,12 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--accept-other-instrument", action="store_true",
                        help="apply a calibration whose CALIB.json names another instrument (refused by default)")
 
+    def attribution_option(s):
+        s.add_argument("--attribution", metavar="ORG.toml",
+                       help="netCDF: who made and distributes the data (creator_*, publisher_*, institution, license, "
+                            "naming_authority, infoUrl, ...: ACDD-1.3/IOOS-1.2 attribute names); 'not stated' without "
+                            "it (docs/examples/attribution.toml)")
+
     command("scenarios", "list the built-in scenarios", cmd_scenarios)
 
     s = command("simulate", "simulate a scenario into a case file (a survey's transects with --runs)", cmd_simulate)
@@ -745,11 +760,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--reference", default="bt", choices=REFERENCES,
                    help="water velocities referenced to the bottom track (bt) or to the GNSS velocity (gnss)")
     s.add_argument("--out", required=True, help="output file (OUT.h5, or OUT.nc for CF netCDF); with many cases, a folder")
+    attribution_option(s)
 
-    s = command("export", "a case or a corrected file as CF-1.8 netCDF (ENU, UTC time, xarray-ready)", cmd_export)
+    s = command("export", "a case or a corrected file as CF-1.8 / ACDD-1.3 / IOOS-1.2 netCDF (ENU, UTC time, "
+                          "xarray-ready)", cmd_export)
     s.add_argument("input", help="CASE.h5 or the output of `adcpdyn correct` (OUT.h5)")
     s.add_argument("--case", help="a corrected file's case (default: the case it names)")
     s.add_argument("--out", required=True, help="OUT.nc")
+    attribution_option(s)
 
     s = command("compare", "every correction method on one case: metrics table and figures", cmd_compare)
     s.add_argument("case", help="CASE.h5 (with /truth, or a GNSS reference)")
@@ -838,7 +856,8 @@ def build_parser() -> argparse.ArgumentParser:
     figure_format(s)
 
     s = command("bench", "benchmarks with their targets", cmd_bench)
-    s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis"],
+    s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis",
+                                     "compliance"],
                    help="which benchmark")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results", help="folder of the results")

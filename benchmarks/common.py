@@ -41,7 +41,7 @@ def print_targets(res: dict, targets: list[Target]) -> None:
 
 def timed_calibration(case, fit=None, **config):
     """(result, setup seconds, solve seconds) of one calibration, warnings silenced."""
-    from ..estimators.calibration import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     tic = time.perf_counter()
     problem = CalibrationProblem(case, CalibrationConfig(**config), fit=fit)
@@ -54,11 +54,11 @@ def timed_calibration(case, fit=None, **config):
 def write_json(res: dict, path: Path) -> None:
     """The suite's figures as JSON, written atomically."""
     from ..cases.atomic import atomic_path
-    from ..estimators.calibration import _jsonable
+    from ..estimators.calibration.result import jsonable
 
     with atomic_path(path) as tmp:
         with open(tmp, "w") as fh:
-            json.dump(_jsonable(res), fh, indent=2)
+            json.dump(jsonable(res), fh, indent=2)
 
 
 def save_figure(fig, path: Path) -> None:

@@ -16,11 +16,11 @@ from ..models.rotations import course_difference_rad
 from .common import machine as _machine
 from .common import save_figure, write_json
 
-SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis")
+SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis", "compliance")
 
 
 def _calibrate(case, **kw):
-    from ..estimators.calibration import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     tic = time.perf_counter()
     r = CalibrationProblem(case, CalibrationConfig(**kw)).solve()
@@ -179,6 +179,7 @@ def bench_correction(sizes, repeats: int = 3) -> dict:
     from ..estimators.adc import dynamic_correction
     from ..estimators.asc import asc
     from ..estimators.attitude_fit import fit_attitude
+    from ..estimators.calibration.record import CalibrationRecord
     from ..models.rotations import euler_matrix
     from ..cases.simulation import simulate
     from ..solvers.rootfinder import RootfinderOptions
@@ -190,8 +191,9 @@ def bench_correction(sizes, repeats: int = 3) -> dict:
         base = simulate(get_scenario(name), seed=1)
         attitude = fit_attitude(base).params
         t = base.truth
-        calib = {"radius_vectors_m": t.radius_vectors_m.tolist(), "installation_ypr_rad": t.installation_ypr_rad.tolist(),
-                 "radius_vectors_head_m": (t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))).tolist()}
+        calib = CalibrationRecord.from_dict(
+            {"radius_vectors_m": t.radius_vectors_m.tolist(), "installation_ypr_rad": t.installation_ypr_rad.tolist(),
+             "radius_vectors_head_m": (t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))).tolist()})
 
         def correct(method, case):
             if method == "asc":
@@ -214,7 +216,8 @@ def bench_correction(sizes, repeats: int = 3) -> dict:
                     out = correct(method, case)
                     best[method] = min(best[method], time.perf_counter() - tic)
                     if method == "rootfinder":
-                        convergence = {k: out.attrs[k] for k in out.attrs if k.startswith("rootfinder_")}
+                        convergence = {k: getattr(out.provenance, f"rootfinder_{k}") for k in
+                                       ("newton_pings", "fallback_pings", "unconverged_pings", "max_residual_m_s")}
             row = {"scenario": name, "n_pings": n, **{f"{m}_pings_per_s": n / best[m] for m in best},
                    "rootfinder_convergence": convergence}
             for m in ("adc", *options):
@@ -246,14 +249,14 @@ def print_correction(res: dict) -> None:
     targets = []
     for big in (r for r in res["rows"] if r["n_pings"] == largest):
         c, at = big["rootfinder_convergence"], f"{big['scenario']}, {largest} pings"
-        print(f"rootfinder on {at}: {c['rootfinder_newton_pings']} took more than the first Newton step, "
-              f"{c['rootfinder_fallback_pings']} went to casadi.rootfinder, {c['rootfinder_unconverged_pings']} "
-              f"unconverged; largest residual {c['rootfinder_max_residual_m_s']:.1e} m/s")
+        print(f"rootfinder on {at}: {c['newton_pings']} took more than the first Newton step, "
+              f"{c['fallback_pings']} went to casadi.rootfinder, {c['unconverged_pings']} "
+              f"unconverged; largest residual {c['max_residual_m_s']:.1e} m/s")
         rf_ok = big["rootfinder_over_asc"] >= 1.0 or big["rootfinder_pings_per_s"] >= 1e6
         targets += [(f"{at}: adc throughput >= ASC's (ratio)", big["adc_over_asc"], big["adc_over_asc"] >= 1.0),
                     (f"{at}: rootfinder throughput >= ASC's or >= 1e6 pings/s (ratio)", big["rootfinder_over_asc"], rf_ok),
-                    (f"{at}: rootfinder converged on every ping (unconverged pings)", c["rootfinder_unconverged_pings"],
-                     c["rootfinder_unconverged_pings"] == 0)]
+                    (f"{at}: rootfinder converged on every ping (unconverged pings)", c["unconverged_pings"],
+                     c["unconverged_pings"] == 0)]
     print("\ntargets")
     for label, value, ok in targets:
         print(f"  [{'met' if ok else 'NOT met'}] {label}: {value:.4g}")
@@ -337,6 +340,10 @@ def _suite(suite: str, quick: bool):
         from .solvers import bench_solvers, figure_solvers, print_solvers
 
         return bench_solvers(starts=8, jit=not quick), print_solvers, figure_solvers
+    if suite == "compliance":
+        from .compliance import bench_compliance, figure_compliance, print_compliance
+
+        return bench_compliance(quick), print_compliance, figure_compliance
     if suite == "diagnosis":
         from .diagnosis_real import bench_diagnosis, figure_diagnosis, print_diagnosis
 

@@ -56,7 +56,7 @@ def _truth(cases) -> dict:
 
 
 def _solve(cases, starts: int, seed: int = 0):
-    from ..estimators.calibration import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     tic = time.perf_counter()
     problem = CalibrationProblem(cases if len(cases) > 1 else cases[0], CalibrationConfig(n_starts=starts, seed=seed))

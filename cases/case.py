@@ -139,6 +139,19 @@ class Reference:
     velocity_m_s: np.ndarray | None = None  # (L, 3) Earth frame
     point_body_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     stationary: bool = False
+    # (L, 2) or None: the interval each velocity averages over, on the case clock (GNSS velocity from
+    # differenced positions: the mean over [fix_k, fix_k+1]); None: instantaneous samples at time_s
+    window_s: np.ndarray | None = None
+
+    def shifted(self, delay_s: float) -> "Reference":
+        """The samples (and their windows) stamped ``delay_s`` later."""
+        return dataclasses.replace(self, time_s=self.time_s + delay_s,
+                                   window_s=None if self.window_s is None else self.window_s + delay_s)
+
+    def subset(self, rows) -> "Reference":
+        """The samples ``rows`` (a mask or indices), with their windows."""
+        return dataclasses.replace(self, time_s=self.time_s[rows], velocity_m_s=self.velocity_m_s[rows],
+                                   window_s=None if self.window_s is None else self.window_s[rows])
 
 
 @dataclass(frozen=True)

@@ -131,7 +131,7 @@ def restrict_to_coverage(case: Case, source: str | None = None,
                 n_ref = int((~inside).sum())
                 notes.append(f"{n_ref} of {tr_.size} reference samples outside the pings' span and attitude record "
                              "left out")
-                changes["reference"] = dataclasses.replace(ref, time_s=tr_[inside], velocity_m_s=ref.velocity_m_s[inside])
+                changes["reference"] = ref.subset(inside)
 
     if not changes:
         return case, None

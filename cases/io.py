@@ -427,6 +427,18 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
                 vr = c.shape(r.velocity_m_s, f, (tr.size, 3), "(L, 3)", f"with L={tr.size} from /reference/time_s")
                 c.no_inf(vr, f)
                 c.within(vr, f, -MAX_SPEED_M_S, MAX_SPEED_M_S, f"velocity components within +-{MAX_SPEED_M_S:g} m/s or NaN")
+            if r.window_s is not None:
+                f = "/reference/window_s"
+                w = c.shape(r.window_s, f, (tr.size, 2), "(L, 2)", f"with L={tr.size} from /reference/time_s")
+                c.finite(w, f)
+                if w.size and np.isfinite(w).all():
+                    tol_w = time_tolerance_s(tr)
+                    if not (w[:, 1] > w[:, 0]).all():
+                        c.fail(f, "expected each window's end after its start (an averaging interval; leave the dataset "
+                                  "out for instantaneous samples), got " + _q(w[~(w[:, 1] > w[:, 0])][0].tolist()))
+                    elif not ((tr >= w[:, 0] - tol_w) & (tr <= w[:, 1] + tol_w)).all():
+                        c.fail(f, "expected every sample's time inside its window, got time "
+                                  f"{tr[~((tr >= w[:, 0] - tol_w) & (tr <= w[:, 1] + tol_w))][0]:.6g} s outside")
             tol = max(time_tolerance_s(tr), time_tolerance_s(t))
             if not ((tr >= t[0] - tol) & (tr <= t[-1] + tol)).any():
                 c.fail("/reference/time_s", f"expected a record overlapping the pings (within {tol:.3g} s), got "
@@ -758,6 +770,7 @@ def _read(f: h5py.File, rd: _Reader) -> Case:
             point_body_m=rd.vector_attr(g, "point_body_m", required=False,
                                         default=np.zeros(3)),
             stationary=bool(stationary),
+            window_s=rd.dataset(g, "window_s", required=False),
         )
 
     truth = None
@@ -930,6 +943,7 @@ def _write(f: h5py.File, case: Case) -> None:
         g = f.create_group("reference")
         _ds(g, "time_s", r.time_s)
         _ds(g, "velocity_m_s", r.velocity_m_s)
+        _ds(g, "window_s", r.window_s)
         g.attrs["point_body_m"] = np.asarray(r.point_body_m, dtype=np.float64)
         g.attrs["stationary"] = np.int64(1 if r.stationary else 0)
 

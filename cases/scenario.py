@@ -163,6 +163,9 @@ class Site:
                              f"got {self.time_origin_utc!r}") from None
 
 
+REFERENCE_FROM = ("velocity", "positions")
+
+
 @dataclass(frozen=True)
 class Run:
     """One measurement with a platform: motion, navigation, water, sensors, noise."""
@@ -181,6 +184,9 @@ class Run:
     reference_interval_s: tuple | None = (1.0, 1.0)
     reference_stationary: bool = False
     reference_present: bool = True
+    # "velocity": instantaneous samples (VTG, INS); "positions": differenced fixes, each velocity the
+    # antenna's displacement between two fixes over their interval (GGA without VTG), with its window
+    reference_from: str = "velocity"
     water: WaterProfile | None = None
     noise: Noise = field(default_factory=Noise)
     doppler: DopplerModel = field(default_factory=DopplerModel)
@@ -189,6 +195,10 @@ class Run:
 
     def __post_init__(self):
         from ..models.effects import get_effect
+
+        if self.reference_from not in REFERENCE_FROM:
+            raise ValueError(f"runs.{self.name}.reference_from: expected one of {list(REFERENCE_FROM)}, "
+                             f"got {self.reference_from!r}")
 
         for spec in self.effects:
             if not isinstance(spec, dict) or set(spec) != {"name", "params"}:

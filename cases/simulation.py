@@ -127,11 +127,21 @@ def simulate(scenario: Scenario, seed: int = 0) -> Case:
     elif run.reference_present:
         t_ref = irregular_times(rng, run.t_start_s, t_end, *run.reference_interval_s)
         ref_kin = kin.at(t_ref)
-        v_sym, dL_sym = ca.SX.sym("v", 3), ca.SX.sym("dL", 3, 3)
-        ref_fun = ca.Function("ref", [v_sym, dL_sym], [reference_point_velocity(v_sym, dL_sym, p_ref)]).map(t_ref.size)
-        v_ref = np.asarray(ref_fun(ref_kin["vessel_velocity"].T, ref_kin["dLambda_dt"].transpose(1, 0, 2).reshape(3, -1))).T
-        v_ref = v_ref + ar1_noise(rng.normal(size=v_ref.shape), noise.reference_ar1) * noise.reference_m_s
-        reference = Reference(time_s=t_ref, velocity_m_s=v_ref, point_body_m=p_ref)
+        if run.reference_from == "positions":  # fixes of the antenna, differenced: the mean velocity between two fixes
+            dt = np.diff(t_ref)
+            # position noise whose differences have the velocity noise level at the median interval
+            fix_noise = noise.reference_m_s * float(np.median(dt)) / np.sqrt(2.0)
+            antenna = ref_kin["G"] + np.einsum("nij,j->ni", ref_kin["Lambda"], p_ref)
+            antenna = antenna + ar1_noise(rng.normal(size=antenna.shape), noise.reference_ar1) * fix_noise
+            v_ref = np.diff(antenna, axis=0) / dt[:, None]
+            window = np.column_stack([t_ref[:-1], t_ref[1:]])
+            reference = Reference(time_s=window.mean(axis=1), velocity_m_s=v_ref, point_body_m=p_ref, window_s=window)
+        else:
+            v_sym, dL_sym = ca.SX.sym("v", 3), ca.SX.sym("dL", 3, 3)
+            ref_fun = ca.Function("ref", [v_sym, dL_sym], [reference_point_velocity(v_sym, dL_sym, p_ref)]).map(t_ref.size)
+            v_ref = np.asarray(ref_fun(ref_kin["vessel_velocity"].T, ref_kin["dLambda_dt"].transpose(1, 0, 2).reshape(3, -1))).T
+            v_ref = v_ref + ar1_noise(rng.normal(size=v_ref.shape), noise.reference_ar1) * noise.reference_m_s
+            reference = Reference(time_s=t_ref, velocity_m_s=v_ref, point_body_m=p_ref)
 
     truth = Truth(
         radius_vectors_m=kin.radius_vectors.copy(),

@@ -35,8 +35,9 @@ from ..models.kinematics import centre_of_rotation_depth
 from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
 from ..models.rotations import euler_matrix
 from ..models.sensors import compass_correction
-from ..cases.corrected import Correction
+from ..cases.corrected import Correction, CorrectionProvenance
 from .attitude_fit import fit_attitude, sampled_attitude
+from .calibration.record import CalibrationRecord
 
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
 
@@ -177,16 +178,14 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
     return V, err, n_good, info
 
 
-def lever_arms_from_calibration(calibration: dict, case: Case) -> tuple[np.ndarray, np.ndarray]:
-    """(lever arms in the case's sensor frame, installation angles for beams) from CALIB.json contents."""
-    from .calibration_file import installation_angles, lever_arms
-
+def lever_arms_from_calibration(calibration: CalibrationRecord, case: Case) -> tuple[np.ndarray, np.ndarray]:
+    """(lever arms in the case's sensor frame, installation angles for beams) from a calibration."""
     if case.attitude.frame == "transducer":
-        return lever_arms(calibration, "transducer"), np.zeros(3)
-    return lever_arms(calibration, "vessel"), installation_angles(calibration)
+        return calibration.lever_arms_in("transducer"), np.zeros(3)
+    return calibration.lever_arms_in("vessel"), calibration.installation()
 
 
-def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
+def with_heading_misalignment(case: Case, calibration: CalibrationRecord | None) -> Case:
     """The case with a head sensor's heading readings turned by the calibration's heading misalignment.
 
     For a sensor inside the head, the misalignment found against the reference (compass error,
@@ -195,20 +194,16 @@ def with_heading_misalignment(case: Case, calibration: dict | None) -> Case:
     when the calibration found one (:func:`~adcpdyn.models.sensors.compass_correction`). Other
     cases are returned unchanged.
     """
-    from .calibration_file import heading_misalignment
-
-    delta = heading_misalignment(calibration)
+    delta = None if calibration is None else calibration.heading_misalignment_rad
     if delta is None or case.attitude.frame != "transducer":
         return case
-    deviation = calibration.get("compass_deviation_rad") or {}
     psi = case.attitude.heading_rad
-    correction = compass_correction(psi, float(delta), *(float(deviation.get(k) or 0.0)
-                                                         for k in ("sin", "cos", "mean_sin", "mean_cos")))
+    correction = compass_correction(psi, delta, *calibration.compass_deviation_applied())
     att = dataclasses.replace(case.attitude, heading_rad=psi + correction)
     return case.replace(attitude=att)
 
 
-def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None = None,
+def dynamic_correction(case: Case, method: str = "adc", calibration: CalibrationRecord | None = None,
                        attitude: AttitudeParams | None = None, timing: str = "deep",
                        rootfinder_options=None, water_reference: str = "bt") -> Correction:
     """Correct every ping of a case (see module docstring).
@@ -218,8 +213,8 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     case : Case
     method : str
         ``adc``, ``paper_literal``, ``rootfinder`` or ``oracle``.
-    calibration : dict
-        Contents of CALIB.json (lever arms, installation angles); not used by ``oracle``.
+    calibration : CalibrationRecord
+        Lever arms, installation angles, heading correction, attitude source; not used by ``oracle``.
     attitude : AttitudeParams, optional
         Attitude model of this run in the sensor frame (default: fitted to its samples).
     timing : str
@@ -245,7 +240,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     if method == "oracle":
         if case.truth is None or "attitude_model" not in case.truth.extra_attrs:
             raise ValueError(f"{case.name}: /truth: the oracle needs a case simulated by adcpdyn (true attitude model)")
-        from .calibration_file import attitude_model_from
+        from .calibration.file import attitude_model_from
 
         attitude = attitude_model_from(case.truth.extra_attrs["attitude_model"],
                                        f'{case.name}: /truth.attrs["attitude_model"]')
@@ -253,12 +248,9 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     else:
         if calibration is None:
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
-        from .calibration_file import as_calibration
-
-        calibration = as_calibration(calibration)
         case = with_heading_misalignment(case, calibration)
         lever, ypr_st = lever_arms_from_calibration(calibration, case)
-        if attitude is None and calibration.get("attitude_source") == "samples":  # as the calibration's beams
+        if attitude is None and calibration.attitude_source == "samples":  # as the calibration's beams
             attitude = sampled_attitude(case)
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"
@@ -273,9 +265,10 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: dict | None
     if case.water is not None:
         water, relative, info["water_reference"], info["water_reference_note"] = _referenced_water(
             case, attitude, lever, ypr_st, V, tangential, timing, water_reference, calibration, method == "oracle")
+    provenance = CorrectionProvenance(lever_arms_sensor_m=np.asarray(lever), installation_ypr_rad=np.asarray(ypr_st),
+                                      timing=timing, **info)
     return Correction(method=method, time_s=case.pings.time_s.copy(), vessel_velocity_m_s=V, error_velocity_m_s=err,
-                      beams_used=n_good, water_velocity_m_s=water, attrs={"lever_arms_sensor_m": np.asarray(lever).tolist(),
-                                                "installation_ypr_rad": np.asarray(ypr_st).tolist(), "timing": timing, **info},
+                      beams_used=n_good, water_velocity_m_s=water, provenance=provenance,
                       water_relative_velocity_m_s=relative)
 
 
@@ -285,7 +278,8 @@ def _referenced_water(case, attitude, lever, ypr_st, V, tangential, timing, refe
 
     check_reference(reference, case)
     if reference == "gnss":
-        V = centre_velocity_from_reference(case, attitude, reference_point_in_sensor_frame(case, calibration, oracle))
+        nominal = None if calibration is None else calibration.nominal_installation_ypr_rad
+        V = centre_velocity_from_reference(case, attitude, reference_point_in_sensor_frame(case, nominal, oracle))
     water = _water(case, attitude, lever, ypr_st, V, tangential, timing)
     relative = _water(case, attitude, lever, ypr_st, np.zeros_like(V), tangential, timing)
     note = REFERENCE_NOTES[reference] + ("; each cell solved with that vessel velocity (Eq. 95), the relative velocity "

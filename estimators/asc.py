@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cases.case import Case
-from ..cases.corrected import Correction
+from ..cases.corrected import Correction, CorrectionProvenance
 from ..models.frames import beams_to_earth, sensed_rotation
 
 
@@ -50,7 +50,7 @@ def asc(case: Case, installation_ypr_rad=None, water_reference: str = "bt") -> C
     bt = case.pings.bt_radial_m_s
     v, err, n_good = beams_to_earth(bt, B, R)
     water = relative = None
-    attrs = {"installation_ypr_rad": ypr_tb.tolist()}
+    provenance = CorrectionProvenance(installation_ypr_rad=ypr_tb)
     if case.water is not None:
         from .water import REFERENCE_NOTES, check_reference, reference_velocity_at, static_relative_water
 
@@ -68,7 +68,7 @@ def asc(case: Case, installation_ypr_rad=None, water_reference: str = "bt") -> C
         if water_reference == "gnss" and np.any(case.reference.point_body_m):
             note += ("; the static correction takes the reference point's velocity for the transducer's (the lever arm "
                      "between them is ignored, as is every rotation)")
-        attrs.update(water_reference=water_reference, water_reference_note=note)
+        provenance = provenance.replace(water_reference=water_reference, water_reference_note=note)
     return Correction(
         method="asc",
         time_s=case.pings.time_s.copy(),
@@ -76,6 +76,6 @@ def asc(case: Case, installation_ypr_rad=None, water_reference: str = "bt") -> C
         error_velocity_m_s=err,
         beams_used=n_good,
         water_velocity_m_s=water,
-        attrs=attrs,
+        provenance=provenance,
         water_relative_velocity_m_s=relative,
     )

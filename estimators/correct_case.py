@@ -7,62 +7,36 @@ import dataclasses
 import numpy as np
 
 from ..cases.case import Case
+from .calibration.record import CalibrationRecord
 
 CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
 
 
-def installation_from(calibration: dict) -> np.ndarray:
-    """Installation angles of a CALIB.json, or a one-line error naming the field."""
-    from .calibration_file import installation_angles
-
-    return installation_angles(calibration)
-
-
-def assumed_installation(calibration: dict) -> np.ndarray:
-    """The nominal installation angles of the calibration's configuration (the mounting as set up)."""
-    from .calibration_file import nominal_installation
-
-    return nominal_installation(calibration)
-
-
-def moving_bed_for(calibration: dict | None, case: Case) -> tuple[np.ndarray | None, str]:
-    """The bed velocity (north, east) a calibration found under this case's pings, and where it
-    came from (:func:`~adcpdyn.estimators.calibration_file.moving_bed_velocity`, the one lookup:
-    the case's own run when both components are determined, else the site's bed, else none)."""
-    from .calibration_file import moving_bed_velocity
-
-    return moving_bed_velocity(calibration, case.name)
-
-
-def with_calibrated_depth(case: Case, calibration: dict | None) -> tuple[Case, str]:
+def with_calibrated_depth(case: Case, calibration: CalibrationRecord | None) -> tuple[Case, str]:
     """The case with the transducer depth its own calibration found from the slant ranges (the
-    case's entry in ``runs``), and a note; unchanged without one."""
-    own = next((r for r in (calibration or {}).get("runs") or [] if r.get("case") == case.name), None)
-    offset = None if own is None else own.get("transducer_depth_offset_m")
+    case's run of the calibration), and a note; unchanged without one."""
+    own = None if calibration is None else calibration.run_for(case.name)
+    offset = None if own is None else own.transducer_depth_offset_m
     if offset is None or not np.isfinite(offset) or offset == 0:
         return case, ""
     env = case.environment
-    depth = env.transducer_depth_m + float(offset)
-    note = (f"transducer depth {env.transducer_depth_m:.3f} m -> {depth:.3f} m (offset {float(offset):+.3f} m the "
+    depth = env.transducer_depth_m + offset
+    note = (f"transducer depth {env.transducer_depth_m:.3f} m -> {depth:.3f} m (offset {offset:+.3f} m the "
             "calibration found from the slant ranges)")
     return case.replace(environment=dataclasses.replace(env, transducer_depth_m=depth)), note
 
 
-def as_calibrated_run(case: Case, path, calibration: dict | None,
+def as_calibrated_run(case: Case, path, calibration: CalibrationRecord | None,
                       accept_other_instrument: bool = False) -> tuple[Case, list]:
     """The run a calibration is applied to, and the notes on applying it: the calibration checked
-    to be this instrument's (:func:`~.calibration_identity.check_calibration_identity`, a one-line
+    to be this instrument's (:func:`~.calibration.identity.check_calibration_identity`, a one-line
     refusal otherwise), and the case named as the calibration keys its runs (by case name, or by
-    file name when the cases shared one) so that :func:`moving_bed_for` finds its own run."""
+    file name when the cases shared one) so that :meth:`CalibrationRecord.moving_bed_for` finds its own run."""
     from pathlib import Path
 
-    from .calibration_identity import check_calibration_identity
+    from .calibration.identity import check_calibration_identity
 
-    if calibration is not None and not isinstance(calibration, dict):
-        from .calibration_record import calibration_dict
-
-        calibration = calibration_dict(calibration)
-    runs = [r.get("case") for r in (calibration or {}).get("runs") or []]
+    runs = [] if calibration is None else [r.case for r in calibration.runs]
     if case.name not in runs and Path(path).stem in runs:
         case = case.replace(name=Path(path).stem)
     return case, check_calibration_identity(calibration, case, accept_other_instrument)
@@ -71,62 +45,67 @@ def as_calibrated_run(case: Case, path, calibration: dict | None,
 def with_moving_bed(result, bed: np.ndarray, source: str):
     """Bottom track measures the vessel over a moving bed: add the bed back to the vessel velocity
     and to water velocities referenced to it (not to those referenced to the GNSS, already over
-    ground), and say so in the attributes."""
+    ground), and say so in its provenance."""
     offset = np.array([bed[0], bed[1], 0.0])
     water = result.water_velocity_m_s
-    if water is not None and result.attrs.get("water_reference", "bt") == "bt":
+    if water is not None and result.provenance.water_reference in (None, "bt"):
         water = water + offset
-    attrs = {**result.attrs, "moving_bed_velocity_m_s": offset[:2].tolist(),
-             "moving_bed_note": f"bed velocity from {source} added to the bottom-track vessel velocity "
-                                "(and to the water velocities referenced to it): velocities are over ground"}
+    provenance = result.provenance.replace(
+        moving_bed_velocity_m_s=offset[:2],
+        moving_bed_note=f"bed velocity from {source} added to the bottom-track vessel velocity (and to the water "
+                        "velocities referenced to it): velocities are over ground")
     return dataclasses.replace(result, vessel_velocity_m_s=result.vessel_velocity_m_s + offset, water_velocity_m_s=water,
-                               attrs=attrs)
+                               provenance=provenance)
 
 
-def correct_case(case: Case, method: str, calibration=None, timing: str = "deep", reference: str = "bt"):
+def correct_case(case: Case, method: str, calibration: CalibrationRecord | None = None, timing: str = "deep",
+                 reference: str = "bt"):
     """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
     sensor, its heading misalignment) or a dynamic method of
     :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``; then the moving bed
-    the calibration found under this case added back (:func:`moving_bed_for`). Water cells are
-    referenced to the bottom track or to the GNSS (``reference``: ``bt`` | ``gnss``,
-    :mod:`adcpdyn.estimators.water`); the heading corrections applied are in the result's attrs.
+    the calibration found under this case added back (:meth:`CalibrationRecord.moving_bed_for`).
+    Water cells are referenced to the bottom track or to the GNSS (``reference``: ``bt`` | ``gnss``,
+    :mod:`adcpdyn.estimators.water`); what was applied (headings, bed, transducer depth) is in the
+    result's ``provenance``.
 
-    ``calibration``: None, a CALIB.json path, a parsed dict, a ``CalibrationResult`` or a
-    ``CalibrationRecord`` (:func:`~adcpdyn.estimators.calibration_record.calibration_dict`)."""
-    from .calibration_record import calibration_dict
+    ``calibration``: the typed record (:func:`~adcpdyn.estimators.calibration.record.as_record`
+    reads every other form once, where it enters), or None."""
     from .water import check_reference
 
     check_reference(reference)
-    calibration = calibration_dict(calibration)
+    entered = float(case.environment.transducer_depth_m)
     case, depth_note = with_calibrated_depth(case, calibration) if method != "oracle" else (case, "")
     result = _correct(case, method, calibration, timing, reference)
-    result.attrs.update(heading_corrections_applied(case, calibration if method != "oracle" else None))
+    result = result.with_provenance(**heading_corrections_applied(case, calibration if method != "oracle" else None),
+                                    transducer_depth_entered_m=entered)
     if depth_note:
-        result.attrs["transducer_depth_note"] = depth_note
-        result.attrs["transducer_depth_calibrated_m"] = float(case.environment.transducer_depth_m)
-    bed, source = moving_bed_for(calibration, case) if method != "oracle" else _true_bed(case)
-    if bed is None:
-        result.attrs["moving_bed_velocity_m_s"] = None  # recorded: none applied
-        return result
-    return with_moving_bed(result, bed, source)
+        result = result.with_provenance(transducer_depth_note=depth_note,
+                                        transducer_depth_calibrated_m=float(case.environment.transducer_depth_m))
+    if method == "oracle":
+        bed, source = _true_bed(case)
+    else:
+        bed, source = (None, "") if calibration is None else calibration.moving_bed_for(case.name)
+    return result if bed is None else with_moving_bed(result, bed, source)  # no bed: the provenance says none applied
 
 
-def heading_corrections_applied(case: Case, calibration: dict | None) -> dict:
-    """What a correction did to the headings, for its attributes: the heading misalignment and compass
-    deviation applied to a head sensor's readings (the misalignment holds the magnetic declination,
-    which is not applied again), with the calibration's declination and compass error for the record."""
-    delta = None if calibration is None else calibration.get("heading_misalignment_rad")
+def heading_corrections_applied(case: Case, calibration: CalibrationRecord | None) -> dict:
+    """What a correction did to the headings, as :class:`~adcpdyn.cases.corrected.CorrectionProvenance`
+    fields: the heading misalignment and compass deviation applied to a head sensor's readings (the
+    misalignment holds the magnetic declination, which is not applied again), with the calibration's
+    declination and compass error for the record."""
+    delta = None if calibration is None else calibration.heading_misalignment_rad
     if delta is None or case.attitude.frame != "transducer":
         why = ("no calibration" if calibration is None else
                "vessel-frame attitude: installation angles instead" if case.attitude.frame != "transducer" else
                "the calibration has no heading misalignment")
         return {"heading_misalignment_applied_rad": None, "heading_correction_note": f"headings as recorded ({why})",
-                "magnetic_declination_rad": None if calibration is None else calibration.get("magnetic_declination_rad")}
+                "magnetic_declination_rad": None if calibration is None else calibration.magnetic_declination_rad}
     return {
-        "heading_misalignment_applied_rad": float(delta),
-        "compass_deviation_applied_rad": calibration.get("compass_deviation_rad"),
-        "magnetic_declination_rad": calibration.get("magnetic_declination_rad"),
-        "compass_error_rad": calibration.get("compass_error_rad"),
+        "heading_misalignment_applied_rad": delta,
+        "compass_deviation_applied_rad": None if calibration.compass_deviation_rad is None else
+        calibration.compass_deviation_applied(),
+        "magnetic_declination_rad": calibration.magnetic_declination_rad,
+        "compass_error_rad": calibration.compass_error_rad,
         "heading_correction_note": ("true heading = recorded heading + heading misalignment (+ compass deviation): "
                                     "the misalignment holds the magnetic declination, not applied separately"),
     }
@@ -141,29 +120,23 @@ def _true_bed(case: Case) -> tuple[np.ndarray | None, str]:
     return np.array([beds[0]["velocity_north_m_s"], beds[0]["velocity_east_m_s"]]), "/truth (the simulated bed)"
 
 
-def _correct(case: Case, method: str, calibration: dict | None, timing: str, reference: str = "bt"):
+def _correct(case: Case, method: str, calibration: CalibrationRecord | None, timing: str, reference: str = "bt"):
     from .adc import dynamic_correction, with_heading_misalignment
     from .asc import asc
 
-    from .calibration_file import as_calibration
-
     if method not in CORRECTION_METHODS:
         raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
-    if calibration is not None:
-        calibration = as_calibration(calibration)
     if method == "asc":
         ypr, note = None, None
         if calibration is not None and case.attitude.frame == "vessel":
-            try:
-                ypr = installation_from(calibration)
-            except ValueError:
-                ypr = assumed_installation(calibration)
+            ypr, determined = calibration.installation_or_nominal()
+            if not determined:
                 note = (f"installation angles not determined by the calibration: its nominal angles "
                         f"{np.round(np.rad2deg(ypr), 3).tolist()} deg are used, as a static correction with the "
                         "configured alignment would; the Earth velocities carry the unknown installation error")
         result = asc(with_heading_misalignment(case, calibration), ypr, water_reference=reference)
         if note:
-            result.attrs["installation_note"] = note
+            result = result.with_provenance(installation_note=note)
     else:
         result = dynamic_correction(case, method, calibration, timing=timing, water_reference=reference)
     if not np.any(result.beams_used >= 3):

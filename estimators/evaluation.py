@@ -36,7 +36,7 @@ def tangential_radial_velocity(case: Case, lever_arms_sensor_m: np.ndarray, fram
 
 
 def calibration_errors(case: Case, result) -> dict:
-    """Errors of a :class:`~adcpdyn.estimators.calibration.CalibrationResult` against truth."""
+    """Errors of a :class:`~adcpdyn.estimators.calibration.result.CalibrationResult` against truth."""
     truth = case.truth
     frame = result.attitude_frame
     Ltb = np.asarray(euler_matrix(*truth.installation_ypr_rad))

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from ..cases.case import Case
-from .calibration import CalibrationConfig, CalibrationProblem
+from .calibration.problem import CalibrationConfig, CalibrationProblem
 from .formulations import FORMULATIONS
 
 

@@ -95,8 +95,30 @@ def hat_basis(times, knots) -> np.ndarray:
 def hat_basis_dm(times, knots) -> ca.DM:
     """:func:`hat_basis_sparse` as a CasADi matrix of the same sparsity, so the residual Jacobian
     stays sparse in the knot columns (a dense DM keeps its zeros as structure)."""
-    H = hat_basis_sparse(times, knots).tocsc()
+    return sparse_dm(hat_basis_sparse(times, knots))
+
+
+def sparse_dm(H: sp.spmatrix) -> ca.DM:
+    """A scipy sparse matrix as a CasADi DM of the same sparsity."""
+    H = sp.csc_matrix(H)
+    H.sort_indices()
     return ca.DM(ca.Sparsity(H.shape[0], H.shape[1], H.indptr.tolist(), H.indices.tolist()), H.data)
+
+
+def window_basis_sparse(windows, knots) -> sp.csr_matrix:
+    """Weights of the knot velocities in the mean of the piecewise-linear velocity over each window
+    [a, b] (rows of ``windows``): exact, since the trapezoid rule is exact on every linear piece
+    between the breakpoints (a, the knots inside, b). A GNSS velocity differenced from two fixes is
+    that mean, not the velocity at its time stamp."""
+    knots = np.asarray(knots, dtype=float)
+    windows = np.asarray(windows, dtype=float).reshape(-1, 2)
+    rows = []
+    for a, b in windows:
+        t = np.concatenate([[a], knots[(knots > a) & (knots < b)], [b]])
+        H = hat_basis_sparse(t, knots)
+        w = np.diff(t) / (2.0 * (b - a))
+        rows.append(sp.csr_matrix(np.concatenate([[0.0], w]) + np.concatenate([w, [0.0]])) @ H)
+    return sp.vstack(rows, format="csr") if rows else sp.csr_matrix((0, knots.size))
 
 
 def bt_noise_from_error_velocity(case: Case) -> float:
@@ -292,6 +314,12 @@ class RunSetup:
     @property
     def reference_velocity_m_s(self) -> np.ndarray:
         return self.case.reference.velocity_m_s[self.reference_rows]
+
+    @property
+    def reference_window_s(self) -> np.ndarray | None:
+        """(L, 2) the interval each reference velocity averages over (None: instantaneous samples)."""
+        w = self.case.reference.window_s
+        return None if w is None else w[self.reference_rows]
 
 
 def knot_times(case: Case, interval_s: float | None) -> np.ndarray | None:
@@ -655,6 +683,13 @@ class SurveyModel:
             return np.ones((N, n_bed))
         return hat_basis(self.runs[k].section_position, np.linspace(0, 1, n_bed))
 
+    def _window_difference(self, k: int, w: np.ndarray, output: int) -> ca.MX:
+        """(X(b) - X(a)) / (b - a) over windows [a, b] (rows of ``w``) of the beams' attitude output
+        ``output`` (1: Lambda, 2: dLambda/dt), 3 x 3L as the mapped attitude gives it."""
+        att_c, L = self.attitude_true[k], w.shape[0]
+        ends = [att_c.map(L)(ca.DM(w[:, j]).T, self._p_rows(k, w[:, j]))[output] for j in (0, 1)]
+        return ca.times(ends[1] - ends[0], ca.repmat(ca.DM(np.repeat(1.0 / (w[:, 1] - w[:, 0]), 3)).T, 3, 1))
+
     def _build_residuals(self):
         models, channels = [], []
         self.bt_functions, self.g_depth = [], []
@@ -722,15 +757,27 @@ class SurveyModel:
                 t_ref, v_meas = run.reference_time_s, run.reference_velocity_m_s
                 L = t_ref.size
                 t_nav = t_ref - run.reference_shift_s  # the time each sample holds (a reference latency's estimate)
-                dLam = att_c.map(L)(ca.DM(t_nav).T, self._p_rows(k, t_nav))[2]
-                v_model = ca.mtimes(hat_basis_dm(t_nav, run.knots), V)
                 p_ref = ca.DM(self.reference_point_sensor(case))
-                if any(getattr(e, "shifts_reference", False) for e, _ in terms):  # d/dt of the antenna's velocity
-                    rot = [REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), att_c.map(L)(ca.DM(t_nav + dt).T,
-                                                                                     self._p_rows(k, t_nav + dt))[2],
-                                                     ca.repmat(p_ref, 1, L)) for dt in (-ROTATION_STEP_S, ROTATION_STEP_S)]
-                    ctx.reference_slope = (navigation_slope(t_nav, run.knots, V)
-                                           + ca.transpose(rot[1] - rot[0]) / (2 * ROTATION_STEP_S))
+                shifts = any(getattr(e, "shifts_reference", False) for e, _ in terms)
+                if run.reference_window_s is None:  # instantaneous samples
+                    dLam = att_c.map(L)(ca.DM(t_nav).T, self._p_rows(k, t_nav))[2]
+                    v_model = ca.mtimes(hat_basis_dm(t_nav, run.knots), V)
+                    if shifts:  # d/dt of the antenna's velocity
+                        rot = [REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), att_c.map(L)(ca.DM(t_nav + dt).T,
+                                                                                         self._p_rows(k, t_nav + dt))[2],
+                                                         ca.repmat(p_ref, 1, L)) for dt in (-ROTATION_STEP_S, ROTATION_STEP_S)]
+                        ctx.reference_slope = (navigation_slope(t_nav, run.knots, V)
+                                               + ca.transpose(rot[1] - rot[0]) / (2 * ROTATION_STEP_S))
+                else:  # means over windows (differenced positions): the antenna's displacement over each window
+                    w = run.reference_window_s - run.reference_shift_s
+                    dLam = self._window_difference(k, w, 1)  # (Lambda(b) - Lambda(a)) / (b - a)
+                    v_model = ca.mtimes(sparse_dm(window_basis_sparse(w, run.knots)), V)
+                    if shifts:  # d/dt of a window mean: (x(b) - x(a)) / (b - a)
+                        ends = [hat_basis_sparse(w[:, j], run.knots) for j in (0, 1)]
+                        rot = REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), self._window_difference(k, w, 2),
+                                                        ca.repmat(p_ref, 1, L))
+                        ctx.reference_slope = (ca.mtimes(sparse_dm(sp.diags(1.0 / (w[:, 1] - w[:, 0])) @ (ends[1] - ends[0])), V)
+                                               + ca.transpose(rot))
                 for e, th in terms:
                     v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
                 v_ref = REFERENCE_VELOCITY.map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
@@ -898,14 +945,25 @@ class SurveyModel:
                 t_ref = run.reference_time_s
                 idx = np.concatenate([index[f"attitude{k}"], index["heading"]])
                 s = ca.SX.sym("s", idx.size)
-                d1 = ca.SX.sym("d", 1 + n_local)
-                p_row = d1[1:] if sampled else (s[:n_att] if run.attitude_source == "model" else frozen(run))
-                if has_h:
-                    p_row = ca.vertcat(p_row, s[n_att:])
-                dLam = self.attitude_true[k](d1[0], p_row)[2]
+                w = run.reference_window_s
+                ends = 1 if w is None else 2  # an instantaneous sample, or a window's two ends
+                d1 = ca.SX.sym("d", ends * (1 + n_local))
+
+                def p_at(j):
+                    p_row = d1[ends + j * n_local:ends + (j + 1) * n_local] if sampled else (
+                        s[:n_att] if run.attitude_source == "model" else frozen(run))
+                    return ca.vertcat(p_row, s[n_att:]) if has_h else p_row
+
+                if w is None:
+                    dLam = self.attitude_true[k](d1[0], p_at(0))[2]
+                    data, velocity_basis = np.vstack([t_ref[None, :], local(t_ref)]), basis(t_ref)
+                else:  # the mean over the window: (Lambda(b) - Lambda(a)) / (b - a) and the window mean of V
+                    dLam = (self.attitude_true[k](d1[1], p_at(1))[1] - self.attitude_true[k](d1[0], p_at(0))[1]) / (d1[1] - d1[0])
+                    data = np.vstack([w.T, local(w[:, 0]), local(w[:, 1])])
+                    velocity_basis = window_basis_sparse(w, run.knots)
                 vs = REFERENCE_VELOCITY(v, dLam, ca.DM(self.reference_point_sensor(case)))
-                blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), np.vstack([t_ref[None, :], local(t_ref)]),
-                                       offset, velocity_basis=basis(t_ref), shared_index=idx, knot_columns=knots_cols))
+                blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), data,
+                                       offset, velocity_basis=velocity_basis, shared_index=idx, knot_columns=knots_cols))
                 offset += 3 * t_ref.size
         if self.has_prior:
             d, v, s = ca.SX.sym("d", 1), ca.SX.sym("v", 3), ca.SX.sym("s", 2)

@@ -75,20 +75,21 @@ def static_relative_water(case: Case, rotation: np.ndarray) -> np.ndarray:
     return v.reshape(N, K, 3)
 
 
-def reference_point_in_sensor_frame(case: Case, calibration: dict | None, oracle: bool = False) -> np.ndarray:
+def reference_point_in_sensor_frame(case: Case, nominal_installation_ypr_rad=None, oracle: bool = False) -> np.ndarray:
     """The reference's body point in the frame of the attitude the corrections use.
 
     Vessel-frame attitude (and the oracle's true attitude): the body point itself. A
     sensor in the head: turned into the head frame by the calibration's nominal
-    installation angles, as the calibration's measurement model does; zeros stay zeros.
+    installation angles (``nominal_installation_ypr_rad``, (3,), as the calibration's
+    measurement model does); zeros stay zeros.
     """
     from ..models.rotations import euler_matrix
 
     p = np.asarray(case.reference.point_body_m, dtype=float)
     if oracle or case.attitude.frame == "vessel" or not np.any(p):
         return p
-    nominal = ((calibration or {}).get("config") or {}).get("nominal_installation_ypr_rad")
-    if nominal is None or any(v is None for v in nominal):
+    nominal = nominal_installation_ypr_rad
+    if nominal is None or not np.all(np.isfinite(nominal)):
         raise ValueError("calibration: config.nominal_installation_ypr_rad: needed to put the reference point "
                          f"{p.tolist()} m into the head sensor's frame for --reference gnss, got none")
     return np.asarray(euler_matrix(*np.asarray(nominal, dtype=float))).T @ p

@@ -61,7 +61,7 @@ def base_files(folder: Path) -> dict:
 
     from adcpdyn.cases.io import write_case
     from adcpdyn.cases.scenario import get_scenario
-    from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
+    from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
     from adcpdyn.cases.simulation import simulate
 
     folder.mkdir(parents=True, exist_ok=True)

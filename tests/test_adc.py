@@ -12,16 +12,17 @@ from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
 from adcpdyn.estimators.adc import dynamic_correction
 from adcpdyn.estimators.asc import asc
+from adcpdyn.estimators.calibration.record import CalibrationRecord
 from adcpdyn.models.rotations import euler_matrix
 from adcpdyn.cases.simulation import simulate
 
 
-def truth_calibration(case) -> dict:
-    """A calibration dict holding the simulator's true lever arms (what CALIB.json would hold)."""
+def truth_calibration(case) -> CalibrationRecord:
+    """A calibration holding the simulator's true lever arms (what CALIB.json would hold)."""
     t = case.truth
     head = t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))
-    return {"radius_vectors_m": t.radius_vectors_m.tolist(), "radius_vectors_head_m": head.tolist(),
-            "installation_ypr_rad": t.installation_ypr_rad.tolist()}
+    return CalibrationRecord.from_dict({"radius_vectors_m": t.radius_vectors_m.tolist(), "radius_vectors_head_m": head.tolist(),
+                                        "installation_ypr_rad": t.installation_ypr_rad.tolist()})
 
 
 def test_no_rotation_dynamic_equals_static_correction(pool_still):
@@ -70,7 +71,7 @@ def test_methods_need_a_calibration_and_a_known_name():
     with pytest.raises(ValueError, match="method"):
         dynamic_correction(case, "magic", truth_calibration(case))
     with pytest.raises(ValueError, match="null"):
-        dynamic_correction(case, "adc", {"radius_vectors_head_m": [[None] * 3] * 4})
+        dynamic_correction(case, "adc", CalibrationRecord.from_dict({"radius_vectors_head_m": [[None] * 3] * 4}))
 
 
 def test_compare_and_correct_from_the_command_line(tmp_path, capsys):
@@ -122,9 +123,9 @@ def test_pings_the_newton_steps_leave_unconverged_go_to_casadi_rootfinder():
     calib = truth_calibration(case)
     default = dynamic_correction(case, "rootfinder", calib)
     bare = dynamic_correction(case, "rootfinder", calib, rootfinder_options=RootfinderOptions(steps=0))
-    assert default.attrs["rootfinder_fallback_pings"] == 0
-    assert bare.attrs["rootfinder_fallback_pings"] > 0
-    assert bare.attrs["rootfinder_unconverged_pings"] == default.attrs["rootfinder_unconverged_pings"] == 0
+    assert default.provenance.rootfinder_fallback_pings == 0
+    assert bare.provenance.rootfinder_fallback_pings > 0
+    assert bare.provenance.rootfinder_unconverged_pings == default.provenance.rootfinder_unconverged_pings == 0
     assert np.nanmax(np.abs(bare.vessel_velocity_m_s - default.vessel_velocity_m_s)) < 1e-9
 
 
@@ -165,8 +166,8 @@ def test_a_calibration_on_the_samples_corrects_with_the_samples():
     case = simulate(noise_free(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0))), seed=3)
     t = case.truth
     calib = {"radius_vectors_m": t.radius_vectors_m.tolist(), "installation_ypr_rad": t.installation_ypr_rad.tolist()}
-    model = dynamic_correction(case, "adc", calib)
-    sampled = dynamic_correction(case, "adc", {**calib, "attitude_source": "samples"})
+    model = dynamic_correction(case, "adc", CalibrationRecord.from_dict(calib))
+    sampled = dynamic_correction(case, "adc", CalibrationRecord.from_dict({**calib, "attitude_source": "samples"}))
     rms = lambda v: float(np.sqrt(np.nanmean(np.sum((v - t.vessel_velocity_m_s) ** 2, axis=1))))
     static = asc(case, t.installation_ypr_rad).vessel_velocity_m_s
     # the samples' segment-average rates leave a few mm/s where the motion curves (the first
@@ -181,6 +182,6 @@ def test_a_calibration_on_the_samples_corrects_with_the_samples():
     spline = evaluate_attitude(SampledAttitude(a.time_s, a.ypr()), mid)["ypr"]
     for j in (1, 2):
         assert np.sqrt(np.mean((spline[:, j] - true[:, j]) ** 2)) < 0.5 * np.sqrt(np.mean((linear[:, j] - true[:, j]) ** 2))
-    exact = dynamic_correction(case, "rootfinder", {**calib, "attitude_source": "samples"})
-    assert exact.attrs["rootfinder_unconverged_pings"] == 0
+    exact = dynamic_correction(case, "rootfinder", CalibrationRecord.from_dict({**calib, "attitude_source": "samples"}))
+    assert exact.provenance.rootfinder_unconverged_pings == 0
     assert np.nanmax(np.abs(exact.vessel_velocity_m_s - sampled.vessel_velocity_m_s)) < 1e-4

@@ -46,6 +46,7 @@ def test_import_adcpdyn_is_light_and_exposes_the_api():
 
 
 def test_correct_takes_the_result_its_dict_its_file_and_its_record_with_the_same_numbers(calibrated):
+    from adcpdyn.estimators.calibration.record import as_record
     from adcpdyn.estimators.correct_case import correct_case
 
     result, path, _, m1 = calibrated
@@ -57,9 +58,9 @@ def test_correct_takes_the_result_its_dict_its_file_and_its_record_with_the_same
         assert np.isfinite(ref).all()
         for k, r in out.items():
             np.testing.assert_array_equal(r.vessel_velocity_m_s, ref, err_msg=f"{method} with the {k}")
-    # the issue's symptom: the estimators' entry point took only dicts ('get')
+    # the estimators read the record the API reads every form into once
     case = adcpdyn.read_case(m1)
-    direct = correct_case(case, "adc", result).vessel_velocity_m_s
+    direct = correct_case(case, "adc", as_record(result)).vessel_velocity_m_s
     np.testing.assert_array_equal(direct, adcpdyn.correct(case, "adc", result).vessel_velocity_m_s)
     with pytest.raises(ValueError, match=r"^calibration: expected a CALIB.json path, a dict, a CalibrationResult"):
         adcpdyn.correct(m1, "adc", 3.0)
@@ -71,11 +72,12 @@ def test_the_pipeline_on_a_simulated_case_in_memory(calibrated, tmp_path):
     result, _, _, m1 = calibrated
     case = adcpdyn.read_case(m1)
     corrected = adcpdyn.correct(case, "adc", result)
-    assert corrected.attrs["calibration_file"].startswith("none (a CalibrationResult in memory")
-    assert corrected.attrs["source_case_file"] is None and corrected.attrs["source_case_name"] == "pool_m1"
+    assert corrected.provenance.calibration_file.startswith("none (a CalibrationResult in memory")
+    assert corrected.provenance.source_case_file is None and corrected.provenance.source_case_name == "pool_m1"
     ds = adcpdyn.to_xarray(case, corrected)
-    assert ds.sizes["time"] == case.pings.n and ds.attrs["processing_method"] == "adc"
-    np.testing.assert_array_equal(ds["vessel_velocity_north"].values, corrected.vessel_velocity_m_s[:, 0])
+    assert ds["case_time"].size == case.pings.n and ds.attrs["processing_method"] == "adc"
+    north = ds["vessel_speed"].values * np.cos(np.deg2rad(ds["vessel_course"].values))  # CF: speed and course
+    np.testing.assert_allclose(north, corrected.vessel_velocity_m_s[:, 0], atol=1e-12)
     comparison = adcpdyn.compare(m1, result)
     assert comparison.against == "truth" and {"asc", "adc", "oracle", "truth"} <= set(comparison.table)
     assert comparison.format_table().splitlines()[0].startswith("method")
@@ -211,7 +213,7 @@ def test_a_correction_of_a_case_the_coverage_step_cut_exports(tmp_path):
 
     write_case(case, path)
     corrected = adcpdyn.correct(path, "asc", out=tmp_path / "cut_asc.h5")
-    assert 0 < corrected.time_s.size < case.pings.n and "left out" in corrected.attrs["warnings"][-1]
+    assert 0 < corrected.time_s.size < case.pings.n and "left out" in corrected.provenance.warnings[-1]
     assert main(["export", str(tmp_path / "cut_asc.h5"), "--out", str(tmp_path / "cut.nc")]) == 0
     ds = adcpdyn.to_xarray(path, corrected)
-    assert ds.sizes["time"] == corrected.time_s.size
+    assert ds["case_time"].size == corrected.time_s.size

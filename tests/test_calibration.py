@@ -13,7 +13,7 @@ import pytest
 from conftest import noise_free
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem, calibrate
+from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate
 from adcpdyn.solvers.multistart import SolverOptions
 from adcpdyn.estimators.evaluation import calibration_errors, true_attitude
 from adcpdyn.models.measurement import bottom_track_function
@@ -182,7 +182,7 @@ def test_a_noisy_compass_keeps_the_motion_model_turns_do_not():
     """3-deg compass noise (white) leaves the model in place; the same run with its heading
     readings turned by a slow 20-deg swing (motion the model cannot follow) takes the samples."""
     from adcpdyn.estimators.attitude_fit import fit_attitude
-    from adcpdyn.estimators.calibration import choose_attitude
+    from adcpdyn.estimators.calibration.problem import choose_attitude
 
     sc = get_scenario("pool_m0")
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, noise=dataclasses.replace(sc.run.noise, heading_rad=np.deg2rad(3.0))))
@@ -209,6 +209,7 @@ def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
 def test_head_sensor_heading_misalignment_against_reference_and_applied_by_correct():
     """A head compass reading 25 degrees too far clockwise: calibration finds -25 degrees and the
     static correction with that CALIB.json follows the true course, while without it it does not."""
+    from adcpdyn.estimators.calibration.record import as_record
     from adcpdyn.estimators.correct_case import correct_case
 
     offset = np.deg2rad(25.0)
@@ -229,7 +230,7 @@ def test_head_sensor_heading_misalignment_against_reference_and_applied_by_corre
     truth = case.truth.vessel_velocity_m_s[:, :2]
     course_error = {}
     for name, c in (("with", calib), ("without", {k: v for k, v in calib.items() if k != "heading_misalignment_rad"})):
-        v = correct_case(case, "asc", c).vessel_velocity_m_s[:, :2]
+        v = correct_case(case, "asc", as_record(c)).vessel_velocity_m_s[:, :2]
         ok = np.all(np.isfinite(v), axis=1)
         cross = np.sum(truth[ok, 0] * v[ok, 1] - truth[ok, 1] * v[ok, 0])
         course_error[name] = np.arctan2(cross, np.sum(truth[ok] * v[ok]))
@@ -302,7 +303,7 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     latter with the beams' attitude from the sensor's samples (per-row attitude data). Three
     cores and one worker: the assembled problem's per-row Jacobians are split over three threads."""
     from adcpdyn.estimators import measurement_model
-    from adcpdyn.estimators.calibration import CalibrationProblem
+    from adcpdyn.estimators.calibration.problem import CalibrationProblem
 
     monkeypatch.setattr(measurement_model.os, "cpu_count", lambda: 3)
 
@@ -355,16 +356,17 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
 
 def test_static_correction_with_undetermined_installation_uses_the_nominal_angles_and_says_so():
     from adcpdyn.estimators.asc import asc
+    from adcpdyn.estimators.calibration.record import as_record
     from adcpdyn.estimators.correct_case import correct_case
 
     sc = get_scenario("deep_ship")
     case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=1)
     calib = {"installation_ypr_rad": [None, None, None], "config": {"nominal_installation_ypr_rad": [0.1, 0.0, 0.0]}}
-    out = correct_case(case, "asc", calib)
-    assert "not determined" in out.attrs["installation_note"]
+    out = correct_case(case, "asc", as_record(calib))
+    assert "not determined" in out.provenance.installation_note
     assert np.allclose(out.vessel_velocity_m_s, asc(case, np.array([0.1, 0.0, 0.0])).vessel_velocity_m_s, equal_nan=True)
     with pytest.raises(ValueError, match="nominal_installation_ypr_rad is missing"):
-        correct_case(case, "asc", {"installation_ypr_rad": [None, None, None]})
+        correct_case(case, "asc", as_record({"installation_ypr_rad": [None, None, None]}))
 
 
 def test_periodogram_finds_a_short_lived_mode_in_a_long_record():

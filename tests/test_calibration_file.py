@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from adcpdyn.cli import main
-from adcpdyn.estimators.calibration_file import KEYS, lever_arms, read_calibration, validate_calibration
+from adcpdyn.estimators.calibration.file import KEYS, read_calibration, validate_calibration
+from adcpdyn.estimators.calibration.record import CalibrationRecord, as_record
 from conftest import calibrated_pool_m0
 
 
@@ -125,9 +126,9 @@ def test_null_means_not_determined_and_is_refused_only_where_needed(written, tmp
     d, m1 = written
     head = {**d, "radius_vectors_head_m": [[None] * 3] * 4, "heading_misalignment_rad": None}
     path = _write(tmp_path, head)
-    calib = read_calibration(path)
+    calib = CalibrationRecord.from_json(path)
     with pytest.raises(ValueError, match=rf"^calibration {path}: radius_vectors_head_m: contains undetermined \(null\)"):
-        lever_arms(calib, "transducer")
+        calib.lever_arms_in("transducer")
     # the static correction needs no lever arm: it runs; the dynamic one refuses in one line
     assert main(["correct", str(m1), "--method", "asc", "--calibration", str(path), "--out", str(tmp_path / "a.h5")]) == 0
     assert main(["correct", str(m1), "--method", "adc", "--calibration", str(path), "--out", str(tmp_path / "b.h5")]) == 2
@@ -158,8 +159,8 @@ def test_in_memory_calibrations_are_validated_too(written):
     d, m1 = written
     case = read_case(m1)
     with pytest.raises(ValueError, match=r"^calibration: radius_vectors_head_m\[0\]: expected a list of 3 numbers"):
-        correct_case(case, "adc", {**d, "radius_vectors_head_m": [[0.0, 0.0]] * 4})
-    assert np.all(np.isfinite(correct_case(case, "adc", d).vessel_velocity_m_s))
+        correct_case(case, "adc", as_record({**d, "radius_vectors_head_m": [[0.0, 0.0]] * 4}))
+    assert np.all(np.isfinite(correct_case(case, "adc", as_record(d)).vessel_velocity_m_s))
 
 
 def test_every_key_of_the_table_is_checked():
@@ -175,8 +176,6 @@ def test_every_key_of_the_table_is_checked():
 def test_what_the_multi_run_writer_emits_is_valid():
     """The shape of a schema-2 CALIB.json of a joint survey calibration (keys as its writer emits
     them, undetermined numbers null), and the bed each run is corrected with."""
-    from adcpdyn.estimators.calibration_file import moving_bed_velocity
-
     d = {"schema_version": 2, "radius_vectors_m": [[0.1, 0.0, 0.5]] * 4, "radius_vectors_head_m": [[None] * 3] * 4,
          "installation_ypr_rad": [0.2, None, None], "heading_misalignment_rad": 0.2, "heading_misalignment_se_rad": None,
          "magnetic_declination_rad": 0.27, "magnetic_declination_note": "IGRF-14", "compass_error_rad": -0.07,
@@ -187,11 +186,11 @@ def test_what_the_multi_run_writer_emits_is_valid():
          "runs": [{"case": "run01", "n_pings": 231, "moving_bed_velocity_m_s": [0.04, None],
                    "moving_bed_velocity_se_m_s": None, "heading_deg": {"mean": 20.0, "circular_sd": 1.0}},
                   {"case": "run02", "moving_bed_velocity_m_s": [0.06, -0.14]}]}
-    calib = validate_calibration(d, "survey.json")
-    assert moving_bed_velocity(calib, "run02")[0].tolist() == [0.06, -0.14]
-    bed, source = moving_bed_velocity(calib, "run01")  # its own bed is not determined: the site's
+    calib = CalibrationRecord.from_dict(validate_calibration(d, "survey.json"))
+    assert calib.moving_bed_for("run02")[0].tolist() == [0.06, -0.14]
+    bed, source = calib.moving_bed_for("run01")  # its own bed is not determined: the site's
     assert bed.tolist() == [0.05, -0.15] and "site" in source
-    assert moving_bed_velocity({**calib, "moving_bed_velocity_m_s": [None, 0.1]}, "other") == (None, "")
+    assert CalibrationRecord.from_dict({**d, "moving_bed_velocity_m_s": [None, 0.1]}).moving_bed_for("other") == (None, "")
     with pytest.raises(ValueError, match=r"^calibration survey.json: compass_deviation_rad.mean_sin: expected"):
         validate_calibration({**d, "compass_deviation_rad": {"sin": 0.0, "cos": 0.0, "mean_sin": 3.0}}, "survey.json")
     with pytest.raises(ValueError, match=r"^calibration survey.json: runs\[1\].moving_bed_velocity_m_s\[0\]: expected"):

@@ -1,5 +1,5 @@
 """CALIB.json as a typed record (CalibrationResult.from_json), the one conversion of every form a
-calibration is handed over in, and CALIB.json's provenance."""
+calibration is handed over in (as_record), what its readers use, and CALIB.json's provenance."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration_record import CalibrationRecord, calibration_dict
-from adcpdyn.estimators.calibration_result import CalibrationResult
+from adcpdyn.estimators.calibration.record import CalibrationRecord, as_record
+from adcpdyn.estimators.calibration.result import CalibrationResult
 from adcpdyn.estimators.correct_case import correct_case
 from adcpdyn.cases.simulation import simulate
 from conftest import calibrated_pool_m0
@@ -23,21 +23,23 @@ def calibrated(tmp_path_factory):
     return result, path, simulate(get_scenario("pool_m1"), seed=1)
 
 
-def test_correct_case_takes_the_result_its_dict_its_file_and_its_record_with_the_same_numbers(calibrated):
-    """The issue's symptom: correct_case rejected the CalibrationResult it was given ('get')."""
+def test_every_form_of_a_calibration_is_read_into_one_record_with_the_same_numbers(calibrated):
+    """The result, its dict, its file (path or text) and its record: one record, the same corrections."""
     result, path, m1 = calibrated
     forms = {"result": result, "dict": result.to_dict(), "path": path, "str": str(path),
              "record": CalibrationResult.from_json(path), "parsed file": json.loads(path.read_text())}
     for method in ("asc", "adc"):
-        out = {k: correct_case(m1, method, c).vessel_velocity_m_s for k, c in forms.items()}
+        out = {k: correct_case(m1, method, as_record(c)).vessel_velocity_m_s for k, c in forms.items()}
         assert np.isfinite(out["path"]).all()
         for k, v in out.items():
             np.testing.assert_array_equal(v, out["path"], err_msg=f"{method} with the {k}")
     with pytest.raises(ValueError, match=r"^calibration: expected a CALIB.json path, a dict, a CalibrationResult"):
-        calibration_dict(3.0)
+        as_record(3.0)
     with pytest.raises(ValueError, match=r"^calibration .*nope.json: cannot read the file"):
-        correct_case(m1, "adc", path.parent / "nope.json")
-    assert calibration_dict(None) is None
+        as_record(path.parent / "nope.json")
+    assert as_record(None) is None
+    record = as_record(path)
+    assert as_record(record) is record and record.source == str(path)
 
 
 def test_from_json_round_trip(calibrated):
@@ -56,8 +58,7 @@ def test_from_json_round_trip(calibrated):
     assert [r.case for r in rec.runs] == [r.case for r in result.runs] == ["pool_m0"]
     assert rec.runs[0].attitude_model is not None
     assert rec.heading_misalignment_rad is None  # a run at rest: no course to turn onto
-    assert rec.to_dict() is rec.data and rec.data["schema_version"] == 3
-    assert calibration_dict(rec) is rec.data
+    assert rec.data["schema_version"] == 3 and as_record(rec) is rec
 
 
 def test_calibration_json_records_its_provenance(calibrated):
@@ -92,8 +93,8 @@ def test_record_types_a_survey_calibration():
     assert rec.compass_deviation_rad == (0.004, -0.002) and rec.compass_deviation_centre == (0.68, -0.16)
     assert rec.compass_deviation_se_rad == (0.01, 0.0)
     assert rec.moving_bed == "constant" and rec.provenance == {}
-    assert rec.moving_bed_for("run02").tolist() == [0.06, -0.14]
-    assert rec.moving_bed_for("run01").tolist() == [0.05, -0.15]  # its own is not determined: the site's
+    assert rec.moving_bed_for("run02")[0].tolist() == [0.06, -0.14]
+    assert rec.moving_bed_for("run01")[0].tolist() == [0.05, -0.15]  # its own is not determined: the site's
     assert rec.run_for("run01").transducer_depth_offset_m == 0.02 and rec.run_for("nope") is None
     with pytest.raises(ValueError, match=r"^calibration: runs\[1\].moving_bed_velocity_m_s\[0\]: expected"):
         CalibrationRecord.from_dict({**d, "runs": [{"case": "x", "moving_bed_velocity_m_s": [0.0, 0.0]},

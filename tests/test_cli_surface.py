@@ -75,7 +75,7 @@ def test_exit_statuses(calibrated, tmp_path, capsys, monkeypatch):
     assert main(["compare", str(m0), "--format", "gif"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 3 and "--method" in err and "--format" in err
-    from adcpdyn.estimators.calibration_result import CalibrationResult
+    from adcpdyn.estimators.calibration.result import CalibrationResult
 
     monkeypatch.setattr(CalibrationResult, "success", property(lambda self: False))  # a solve that did not converge
     out = tmp_path / "c.json"

@@ -15,7 +15,7 @@ from adcpdyn.cases.corrected import read_correction
 from adcpdyn.cases.io import case_warnings, read_case, write_case
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
-from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
+from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 from adcpdyn.cases.simulation import simulate
 
 SANE_M_S = 20.0  # no boat in these cases moves faster
@@ -71,7 +71,7 @@ def test_missing_attitude_samples_are_accepted_and_left_out(m1, tmp_path, calib,
         out = tmp_path / f"{method}.h5"
         assert main(["correct", str(path), "--method", method, "--calibration", str(calib), "--out", str(out)]) == 0
         corr = _sane(out)
-        assert any("attitude samples with a NaN angle left out" in w for w in corr["settings"]["warnings"])
+        assert any("attitude samples with a NaN angle left out" in w for w in corr["provenance"].warnings)
 
 
 def test_missing_per_ping_bed_depths_fall_back_on_the_attribute(m1):
@@ -189,7 +189,7 @@ def test_unusual_values_are_warnings_in_the_output(m1, tmp_path, capsys):
     out = capsys.readouterr().out
     assert 'warning: /instrument.attrs["sound_speed_m_s"]: 1350 m/s is outside the usual' in out
     assert main(["correct", str(path), "--out", str(tmp_path / "c.h5")]) == 0
-    assert any("sound_speed_m_s" in w for w in read_correction(tmp_path / "c.h5")["settings"]["warnings"])
+    assert any("sound_speed_m_s" in w for w in read_correction(tmp_path / "c.h5")["provenance"].warnings)
 
 
 def test_reference_record_far_longer_than_the_pings_is_trimmed_before_calibrating(m1, tmp_path):

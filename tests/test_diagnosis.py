@@ -219,7 +219,7 @@ def test_calibrated_selftest_diagnoses_with_the_platforms_own_calibration(monkey
     params = get_effect("heave").draw(np.random.default_rng(3))
     row = selftest.run_one("heave", params, 5, "pool", config, calibrated=True)
     assert row["calibrated"] and seen["calibration"] is not None
-    assert [r["case"] for r in seen["calibration"]["runs"]] == [seen["case"] + "_calibration"]
+    assert [r.case for r in seen["calibration"].runs] == [seen["case"] + "_calibration"]
     assert row["verdict"] == "heave"
 
 
@@ -261,3 +261,31 @@ def test_candidates_refitted_in_threads_give_the_same_report():
     assert one.verdict == two.verdict and one.statement == two.statement
     assert [(r["effect"], r["delta_bic"], r["params"]) for r in one.ranking] == \
            [(r["effect"], r["delta_bic"], r["params"]) for r in two.ranking]
+
+
+def _score(effect, shrink, bic, significant=True):
+    from adcpdyn.estimators.diagnosis.diagnose import EffectScore
+
+    return EffectScore(effect=effect, delta_ll=0.0, delta_bic=bic, p_value=0.0, n_params=1, params={}, params_se={},
+                       gap_after=0.0, shrink_fraction=shrink, velocity_error_m_s=None, success=True, status="",
+                       iterations=0, delta_bic_hac=bic, significant=significant)
+
+
+def test_preference_takes_the_best_held_out_prediction_among_the_significant():
+    from adcpdyn.estimators.diagnosis.diagnose import preference
+
+    scores = [_score("compass_offset", 0.24, -32.0), _score("moving_bed", 0.33, -27.0),
+              _score("heave", 0.50, -5.0, significant=False)]
+    order = [s.effect for s in preference(scores, lambda s: s.delta_bic_hac, 10.0)]
+    assert order == ["moving_bed", "compass_offset", "heave"]
+
+
+def test_preference_keeps_the_nested_effect_unless_the_extra_unknowns_are_significant():
+    from adcpdyn.estimators.diagnosis.diagnose import preference
+
+    assert "compass_offset" in get_effect("compass_deviation").nests
+    gain = lambda s: s.delta_bic_hac  # noqa: E731
+    barely = [_score("compass_deviation", 0.29, -51.0), _score("compass_offset", 0.25, -62.0)]
+    assert preference(barely, gain, 10.0)[0].effect == "compass_offset"
+    clearly = [_score("compass_deviation", 0.60, -120.0), _score("compass_offset", 0.25, -62.0)]
+    assert preference(clearly, gain, 10.0)[0].effect == "compass_deviation"

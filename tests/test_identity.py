@@ -15,8 +15,8 @@ from adcpdyn.cases.identity import (InstrumentIdentity, Site, days_apart, distan
 from adcpdyn.cases.io import read_case, write_case
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.calibration_identity import check_calibration_identity
-from adcpdyn.estimators.calibration_record import CalibrationRecord, calibration_dict
+from adcpdyn.estimators.calibration.identity import check_calibration_identity
+from adcpdyn.estimators.calibration.record import CalibrationRecord, as_record
 
 
 def _ident(**changes):
@@ -63,7 +63,7 @@ def test_calibration_records_whose_it_is_and_refuses_another_instrument(pool_cal
     record = CalibrationRecord.from_json(path)
     assert record.instrument == identity_of(m0) and record.schema_version == 3
     assert record.site == Site(None, None, None, None)  # a pool: no GNSS, no UTC; said as null
-    cal = calibration_dict(path)
+    cal = as_record(path)
     m1 = simulate(get_scenario("pool_m1"), seed=1)
     assert check_calibration_identity(cal, m1) == []  # the same boat, the same pool, the same day
     launch = simulate(dataclasses.replace(get_scenario("diag_boat"), run=dataclasses.replace(
@@ -74,7 +74,7 @@ def test_calibration_records_whose_it_is_and_refuses_another_instrument(pool_cal
     assert "applied anyway" in check_calibration_identity(cal, launch, accept_other_instrument=True)[0]
     old = {k: v for k, v in json.loads(path.read_text()).items() if k not in ("instrument", "site")}
     old["schema_version"] = 2
-    assert "does not say which instrument" in check_calibration_identity(calibration_dict(old), launch)[0]
+    assert "does not say which instrument" in check_calibration_identity(as_record(old), launch)[0]
 
 
 def test_every_verb_refuses_another_instruments_calibration_and_writes_nothing(pool_calibration, tmp_path):
@@ -96,7 +96,7 @@ def test_every_verb_refuses_another_instruments_calibration_and_writes_nothing(p
 
 
 def test_joint_calibration_refuses_two_instruments_and_warns_on_two_sites():
-    from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem
+    from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
 
     m0 = simulate(get_scenario("pool_m0"), seed=1)
     sc = get_scenario("diag_boat")
@@ -124,10 +124,10 @@ def test_netcdf_records_the_calibrated_transducer_depth_and_the_entered_one(pool
     m1 = simulate(get_scenario("pool_m1"), seed=1)
     api.correct(m1, "adc", d, out=tmp_path / "m1.nc")
     with xr.open_dataset(tmp_path / "m1.nc") as ds:
-        entered = m1.environment.transducer_depth_m
-        assert float(ds["transducer_depth"]) == pytest.approx(entered + 0.05, abs=1e-12)
-        assert float(ds["transducer_depth_entered"]) == pytest.approx(entered, abs=1e-12)
-        assert "calibrated" in ds["transducer_depth"].attrs["long_name"]
+        entered, adcp = m1.environment.transducer_depth_m, ds["adcp"].attrs  # the instrument's container variable
+        assert adcp["transducer_depth_m"] == pytest.approx(entered + 0.05, abs=1e-12)
+        assert adcp["transducer_depth_entered_m"] == pytest.approx(entered, abs=1e-12)
+        assert "calibrated" in adcp["transducer_depth_comment"]
 
 
 def test_correct_applies_the_site_bed_where_a_runs_own_is_half_determined(pool_calibration):
@@ -140,11 +140,11 @@ def test_correct_applies_the_site_bed_where_a_runs_own_is_half_determined(pool_c
     d["moving_bed_velocity_m_s"], d["moving_bed_velocity_se_m_s"] = [0.05, -0.15], [0.01, 0.01]
     d["runs"][0].update(case="pool_m1", moving_bed_velocity_m_s=[0.04, None])
     m1 = simulate(get_scenario("pool_m1"), seed=1)
-    plain = correct_case(m1, "adc", {k: v for k, v in d.items() if k != "moving_bed_velocity_m_s"} | {"runs": [
-        {**d["runs"][0], "moving_bed_velocity_m_s": None}]})
-    result = correct_case(m1, "adc", d)
-    assert result.attrs["moving_bed_velocity_m_s"] == [0.05, -0.15]
-    assert "site bed" in result.attrs["moving_bed_note"]
+    plain = correct_case(m1, "adc", as_record({k: v for k, v in d.items() if k != "moving_bed_velocity_m_s"} | {"runs": [
+        {**d["runs"][0], "moving_bed_velocity_m_s": None}]}))
+    result = correct_case(m1, "adc", as_record(d))
+    assert result.provenance.moving_bed_velocity_m_s == (0.05, -0.15)
+    assert "site bed" in result.provenance.moving_bed_note
     np.testing.assert_allclose(result.vessel_velocity_m_s[:, :2] - plain.vessel_velocity_m_s[:, :2],
                                np.tile([0.05, -0.15], (m1.pings.n, 1)), atol=1e-12)
-    assert CalibrationRecord.from_dict(d).moving_bed_for("pool_m1").tolist() == [0.05, -0.15]
+    assert CalibrationRecord.from_dict(d).moving_bed_for("pool_m1")[0].tolist() == [0.05, -0.15]

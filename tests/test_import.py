@@ -162,7 +162,7 @@ def test_import_refuses_to_overwrite_input(tmp_path, capsys):
 def _calibrated_misalignment(case, moving_bed="auto") -> tuple[float, float]:
     import warnings
 
-    from adcpdyn.estimators.calibration import CalibrationConfig, calibrate
+    from adcpdyn.estimators.calibration.problem import CalibrationConfig, calibrate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -42,6 +42,10 @@ CF_STANDARD_NAMES = {
     "platform_orientation": "degree",
     "platform_pitch_fore_up": "degree",
     "platform_roll_starboard_down": "degree",
+    "platform_heave_rate_up": "m s-1",
+    "sea_water_speed": "m s-1",
+    "sea_water_velocity_to_direction": "degree",
+    "number_of_observations": "1",
 }
 TIME_UNITS = re.compile(r"^seconds since \d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?$")  # UTC (no zone: UDUNITS, CF)
 
@@ -52,7 +56,7 @@ def cf_problems(path) -> list[str]:
 
     out = []
     with h5netcdf.File(path, "r") as f:
-        if f.attrs.get("Conventions") != "CF-1.8":
+        if "CF-1.8" not in str(f.attrs.get("Conventions")).split(", "):
             out.append(f"Conventions: {f.attrs.get('Conventions')!r}")
         for key in ("title", "history", "source"):
             if not f.attrs.get(key):
@@ -60,8 +64,13 @@ def cf_problems(path) -> list[str]:
         for dim in f.dimensions:
             if dim not in f.variables or f.variables[dim].dimensions != (dim,):
                 out.append(f"dimension {dim}: no coordinate variable")
+        containers = {v.attrs[k] for v in f.variables.values() for k in ("platform", "instrument") if k in v.attrs}
         for name, var in f.variables.items():
             a = dict(var.attrs)
+            if name in containers or "cf_role" in a:  # metadata holders and feature ids: no physical quantity
+                if "long_name" not in a:
+                    out.append(f"{name}: no long_name")
+                continue
             if "units" not in a or not isinstance(a["units"], str):
                 out.append(f"{name}: units missing")
             if "long_name" not in a and "standard_name" not in a:
@@ -87,14 +96,14 @@ def cf_problems(path) -> list[str]:
             for k, v in a.items():
                 if not isinstance(v, (str, bytes, np.ndarray, np.generic, int, float)) and k not in ("DIMENSION_LIST",):
                     out.append(f"{name}.{k}: attribute of type {type(v).__name__}")
-        t = f.variables["time"].attrs
-        if t.get("standard_name") == "time":
-            if not TIME_UNITS.match(str(t.get("units"))) or t.get("calendar") not in ("standard", "gregorian"):
-                out.append(f"time: units {t.get('units')!r}, calendar {t.get('calendar')!r}")
-        elif t.get("units") != "s":
-            out.append(f"time without a UTC origin: units {t.get('units')!r}")
-        if t.get("axis") != "T":
-            out.append("time: axis T missing")
+        if "time" in f.variables:
+            t = f.variables["time"].attrs
+            if t.get("standard_name") != "time" or not TIME_UNITS.match(str(t.get("units"))) \
+                    or t.get("calendar") not in ("standard", "gregorian") or t.get("axis") != "T":
+                out.append(f"time: standard_name {t.get('standard_name')!r}, units {t.get('units')!r}, "
+                           f"calendar {t.get('calendar')!r}, axis {t.get('axis')!r}")
+        elif "case_time" not in f.dimensions or f.variables["case_time"].attrs.get("units") != "s":
+            out.append("without a UTC origin: expected the dimension case_time, its coordinate in s")
         if "depth" in f.variables:
             d = f.variables["depth"].attrs
             if (d.get("axis"), d.get("positive"), d.get("units"), d.get("standard_name")) != ("Z", "down", "m", "depth"):
@@ -120,7 +129,7 @@ def test_read_back_gives_the_same_numbers_in_enu(tmp_path, ocean):
         N, K = ocean.pings.n, ocean.water.cell_depth_m.size
         assert dict(ds.sizes) == {"time": N, "depth": K, "beam": 4}
         assert ds["water_velocity_east"].dims == ("time", "depth")
-        assert ds["water_radial_velocity"].dims == ("time", "depth", "beam")
+        assert ds["water_radial_velocity"].dims == ("beam", "time", "depth")  # CF: T, Z rightmost
         # UTC datetime64 from the case clock
         assert ds["time"].dtype == np.dtype("datetime64[ns]")
         expected = np.datetime64(ORIGIN[:-1], "ns") + np.round(ocean.pings.time_s * 1e9).astype("timedelta64[ns]")
@@ -133,14 +142,17 @@ def test_read_back_gives_the_same_numbers_in_enu(tmp_path, ocean):
         np.testing.assert_array_equal(ds["water_velocity_up"].values, -w[..., 2])
         rel = corr.water_relative_velocity_m_s
         np.testing.assert_array_equal(ds["water_relative_velocity_up"].values, -rel[..., 2])
-        v = corr.vessel_velocity_m_s
-        np.testing.assert_array_equal(ds["vessel_velocity_east"].values, v[:, 1])
+        v = corr.vessel_velocity_m_s  # horizontal as CF's speed and course, east = speed sin(course)
+        course = np.deg2rad(ds["vessel_course"].values)
+        np.testing.assert_allclose(ds["vessel_speed"].values * np.sin(course), v[:, 1], atol=1e-12)
+        np.testing.assert_allclose(ds["vessel_speed"].values * np.cos(course), v[:, 0], atol=1e-12)
         np.testing.assert_array_equal(ds["vessel_velocity_up"].values, -v[:, 2])
         np.testing.assert_allclose(ds["vessel_course"].values, np.rad2deg(np.arctan2(v[:, 1], v[:, 0])) % 360, atol=1e-12)
+        np.testing.assert_allclose(ds["water_speed"].values, np.hypot(w[..., 0], w[..., 1]), atol=1e-12)
         # simulated case: case beam numbers, radials positive away from the transducer
         np.testing.assert_array_equal(ds["beam"].values, [1, 2, 3, 4])
-        np.testing.assert_array_equal(ds["water_radial_velocity"].values, -ocean.water.radial_m_s.transpose(0, 2, 1))
-        np.testing.assert_array_equal(ds["bt_radial_velocity"].values, -ocean.pings.bt_radial_m_s)
+        np.testing.assert_array_equal(ds["water_radial_velocity"].values, -ocean.water.radial_m_s.transpose(1, 0, 2))
+        np.testing.assert_array_equal(ds["bt_radial_velocity"].values, -ocean.pings.bt_radial_m_s.T)
         np.testing.assert_array_equal(ds["depth"].values, ocean.water.cell_depth_m)
         assert ds["water_velocity_north"].attrs["standard_name"] == "northward_sea_water_velocity"
         assert ds.attrs["water_reference"] == "gnss" and ds.attrs["processing_method"] == "asc"
@@ -158,14 +170,18 @@ def test_cf_check_finds_what_it_checks(tmp_path, ocean):
     assert "Conventions" in problems and "cm/s" in problems and "depth: a coordinate variable with _FillValue" in problems
 
 
-def test_without_utc_origin_time_stays_in_case_seconds(tmp_path, ocean):
+def test_without_utc_origin_the_pings_are_on_the_case_clock(tmp_path, ocean):
+    """No date is invented: no time coordinate (CF's needs a reference date), the case clock's seconds instead."""
     case = ocean.replace(time_origin_utc=None)
     path = tmp_path / "s.nc"
     write_netcdf(to_xarray(case), path)
     assert cf_problems(path) == []
     with xr.open_dataset(path, engine="h5netcdf") as ds:
-        np.testing.assert_array_equal(ds["time"].values, case.pings.time_s)
-        assert ds.attrs["time_origin_utc"].startswith("unknown") and ds["time"].attrs["units"] == "s"
+        assert "time" not in ds.variables and ds["water_radial_velocity"].dims == ("beam", "case_time", "depth")
+        np.testing.assert_array_equal(ds["case_time"].values, case.pings.time_s)
+        assert ds["case_time"].attrs["units"] == "s" and "not tied to UTC" in ds["case_time"].attrs["long_name"]
+        assert ds.attrs["time_origin_utc"].startswith("unknown") and "featureType" not in ds.attrs
+        assert "time_coverage_start" not in ds.attrs and ds.attrs["time_coverage_duration"].startswith("PT")
 
 
 @pytest.mark.parametrize("mask", [0o022, 0o027, 0o077, 0o002])
@@ -261,7 +277,7 @@ def test_real_file_beams_are_the_instruments(tmp_path):
     np.testing.assert_array_equal(ds["case_beam"].values, [4, 3, 2, 1])
     raw, _ = read_dolfyn(src)
     K = case.water.cell_depth_m.size
-    vel = np.asarray(raw["vel"].values[:4, :K], dtype=np.float64).transpose(2, 1, 0)  # (N, K, RDI beam)
+    vel = np.asarray(raw["vel"].values[:4, :K], dtype=np.float64).transpose(0, 2, 1)  # (RDI beam, N, K)
     mine = ds["water_radial_velocity"].values
     ok = np.isfinite(vel) & np.isfinite(mine)
     assert ok.sum() > 5000 and np.max(np.abs(mine[ok] + vel[ok])) < 1e-6

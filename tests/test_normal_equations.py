@@ -261,6 +261,7 @@ def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     assert [r["error"] for r in res["rows"]] == ["clean", "moving_bed_m_s"]
     clean, bed = res["rows"]
     assert clean["verdict"] == "none" and bed["hit"] and bed["verdict"].startswith("moving_bed")
+    assert (clean["outcome"], bed["outcome"]) == ("clean", "named")
     assert res["summary"]["per_error"]["moving_bed_m_s"]["smallest_detected"] == 0.3
     assert "| moving_bed_m_s | 0.3 m/s | moving_bed" in format_field_selftest(res)
     written = write_field_selftest(res, tmp_path / "self.json")
@@ -298,3 +299,29 @@ def test_field_selftest_diagnoses_on_top_of_the_files_own_effects():
     assert not _moved({"attitude_latency.delay_s": {"value": 0.51, "se": 0.01}}, own, "delay_s", 1.0)["hit"]  # within noise
     with pytest.raises(ValueError, match="unknown effect|expected one of"):
         DiagnosisConfig(given=("no_such_effect",))
+
+
+def test_field_selftest_says_why_an_error_was_not_named():
+    """Not named because the file cannot show it (its effect alone not significant), because it was
+    not tried (and why), or because another effect was preferred: three different statements."""
+    from types import SimpleNamespace
+
+    from adcpdyn.estimators.diagnosis.field_selftest import outcome
+
+    result = SimpleNamespace(base={"navigation": "random_walk", "skipped_effects": {"reference_latency": "no reference"}})
+    row = {"expected": "moving_bed", "verdict": "compass_offset", "hit": False}
+    mine = {"delta_bic_hac": -27.4, "delta_bic": -40.0, "shrink_fraction": 0.33, "significant": True}
+    assert outcome(row, mine, result) == "outscored by compass_offset (BIC gain -27, shrink 33 %)"
+    assert outcome({**row, "verdict": "none"}, {**mine, "significant": False}, result).startswith("below detection (BIC")
+    assert outcome({**row, "expected": "reference_latency"}, None, result) == "not tried: no reference"
+    assert outcome({**row, "hit": True, "verdict": "moving_bed"}, mine, result) == "named"
+    assert outcome({"expected": "none", "verdict": "heave", "hit": False}, None, result) == "names heave"
+
+
+def test_an_error_nested_in_the_files_own_effect_is_judged_on_that_effect():
+    from adcpdyn.estimators.diagnosis.field_selftest import carrier
+
+    assert carrier("compass_offset", ["heave", "compass_deviation"]) == "compass_deviation"
+    assert carrier("attitude_latency", ["attitude_latency"]) == "attitude_latency"
+    assert carrier("compass_deviation", ["compass_offset"]) is None  # the smaller cannot carry the larger
+    assert carrier("moving_bed", []) is None

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration import CalibrationConfig, CalibrationProblem, calibrate, calibrate_runs
+from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate, calibrate_runs
 from adcpdyn.cases.simulation import simulate
 
 Z_MAX = 3.5
@@ -93,18 +93,19 @@ def test_calibration_file_keeps_the_survey(joint, tmp_path):
 def test_correct_adds_the_run_bed_back_and_says_so(survey, joint, tmp_path):
     """Bottom track measures the vessel over the bed: with the calibration's bed added back, the
     static correction's velocity matches the true velocity over ground; without, it is off by the bed."""
+    from adcpdyn.estimators.calibration.record import as_record
     from adcpdyn.estimators.correct_case import correct_case
 
     path = tmp_path / "calib.json"
     joint.to_json(path)
     calib = json.loads(path.read_text())
     case = survey[0]
-    out = correct_case(case, "asc", calib)
-    assert "moving_bed_note" in out.attrs and out.attrs["moving_bed_velocity_m_s"] == pytest.approx(
+    out = correct_case(case, "asc", as_record(calib))
+    assert out.provenance.moving_bed_note and list(out.provenance.moving_bed_velocity_m_s) == pytest.approx(
         joint.moving_bed_velocity_m_s.tolist())
     truth = case.truth.vessel_velocity_m_s
     with_bed = np.nanmean(out.vessel_velocity_m_s[:, :2] - truth[:, :2], axis=0)
-    without = np.nanmean(correct_case(case, "asc", {**calib, "runs": [], "moving_bed_velocity_m_s": None})
+    without = np.nanmean(correct_case(case, "asc", as_record({**calib, "runs": [], "moving_bed_velocity_m_s": None}))
                          .vessel_velocity_m_s[:, :2] - truth[:, :2], axis=0)
     bed = np.array([BED["velocity_north_m_s"], BED["velocity_east_m_s"]])
     assert np.allclose(without, -bed, atol=0.03)

@@ -13,6 +13,7 @@ from adcpdyn.cases.case import Reference
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.adc import dynamic_correction
 from adcpdyn.estimators.asc import asc
+from adcpdyn.estimators.calibration.record import CalibrationRecord
 from adcpdyn.estimators.correct_case import correct_case, with_moving_bed
 from adcpdyn.estimators.water import check_reference, reference_velocity_at
 from adcpdyn.models.motion import AttitudeParams, evaluate_attitude
@@ -20,11 +21,11 @@ from adcpdyn.models.rotations import euler_matrix
 from adcpdyn.cases.simulation import simulate
 
 
-def truth_calibration(case) -> dict:
+def truth_calibration(case) -> CalibrationRecord:
     t = case.truth
     head = t.radius_vectors_m @ np.asarray(euler_matrix(*t.installation_ypr_rad))
-    return {"radius_vectors_m": t.radius_vectors_m.tolist(), "radius_vectors_head_m": head.tolist(),
-            "installation_ypr_rad": t.installation_ypr_rad.tolist()}
+    return CalibrationRecord.from_dict({"radius_vectors_m": t.radius_vectors_m.tolist(), "radius_vectors_head_m": head.tolist(),
+                                        "installation_ypr_rad": t.installation_ypr_rad.tolist()})
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +54,7 @@ def test_static_water_is_relative_plus_the_reference(ocean):
     assert np.nanmax(np.abs(bt.water_velocity_m_s[four] - (rel[four] + bt.vessel_velocity_m_s[four, None, :]))) < 1e-12
     v_ref = reference_velocity_at(ocean, ocean.pings.time_s)
     assert np.nanmax(np.abs(gnss.water_velocity_m_s - (rel + v_ref[:, None, :]))) < 1e-15
-    assert bt.attrs["water_reference"] == "bt" and gnss.attrs["water_reference"] == "gnss"
+    assert bt.provenance.water_reference == "bt" and gnss.provenance.water_reference == "gnss"
 
 
 @pytest.mark.parametrize("method", ["adc", "rootfinder", "oracle"])
@@ -97,12 +98,12 @@ def test_moving_bed_is_added_to_bottom_track_water_only(ocean):
 
 def test_correct_case_records_what_it_applied(ocean):
     r = correct_case(ocean, "asc", None, reference="gnss")
-    assert r.attrs["water_reference"] == "gnss" and "GNSS" in r.attrs["water_reference_note"]
-    assert r.attrs["heading_misalignment_applied_rad"] is None and "headings as recorded" in r.attrs["heading_correction_note"]
+    assert r.provenance.water_reference == "gnss" and "GNSS" in r.provenance.water_reference_note
+    assert r.provenance.heading_misalignment_applied_rad is None and "headings as recorded" in r.provenance.heading_correction_note
     head = ocean.replace(attitude=dataclasses.replace(ocean.attitude, frame="transducer"))
-    calib = {"heading_misalignment_rad": 0.1, "magnetic_declination_rad": 0.3}
+    calib = CalibrationRecord.from_dict({"heading_misalignment_rad": 0.1, "magnetic_declination_rad": 0.3})
     r = correct_case(head, "asc", calib)
-    assert r.attrs["heading_misalignment_applied_rad"] == 0.1 and r.attrs["magnetic_declination_rad"] == 0.3
+    assert r.provenance.heading_misalignment_applied_rad == 0.1 and r.provenance.magnetic_declination_rad == 0.3
 
 
 def test_reference_errors_are_one_line(ocean):

@@ -9,6 +9,7 @@ from the file's NMEA becomes the reference velocity with the clock offset applie
 from __future__ import annotations
 
 import datetime as dt
+from pathlib import Path
 
 import numpy as np
 
@@ -82,6 +83,7 @@ def import_trdi_dataset(ds, window: Window, name: str) -> tuple[Case, dict]:
 def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes) -> tuple[Case, dict]:
     """The conversions of a dolfyn TRDI dataset; ``file`` is the instrument file (None for a Dataset in memory)."""
     path = file if file is not None else f"dataset {name!r}"
+    recorded = str(Path(file).resolve()) if file is not None else path  # provenance: never relative to a working folder
     a = ds.attrs
     if "vel_bt" not in ds:
         raise ImportFailure(f"{path}: bottom track: none in this file (no TRDI bottom-track block); "
@@ -147,7 +149,7 @@ def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes)
 
     case = Case(
         name=str(name),
-        description=f"imported from {path} by adcpdyn import ({version})",
+        description=f"imported from {recorded} by adcpdyn import ({version})",
         instrument=Instrument(beam_angle_rad=float(beam_angle), transducer_radius_m=0.0,
                               frequency_hz=float(a["carrier_freq"]) * 1e3, sound_speed_m_s=float(np.nanmedian(c_sound)),
                               make="TRDI", model=str(a.get("inst_model") or ""), serial_number=str(a.get("serialnum") or "")),
@@ -159,7 +161,7 @@ def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes)
     )
     attrs = {
         "/provenance": {
-            "source_file": str(path) if file is not None else f"{name} (a dolfyn Dataset in memory; its file not known)",
+            "source_file": recorded if file is not None else f"{name} (a dolfyn Dataset in memory; its file not known)",
             "source_file_sha256": sha256_of(file) if file is not None else "not available (a Dataset in memory, not the file)",
             "reader": version, "vendor": "TRDI",
             "instrument": f"{a.get('inst_model', '?')} {a.get('carrier_freq', '?')} kHz, SN {a.get('serialnum', '?')}, "
@@ -278,7 +280,10 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
     if inside.sum() < gnss.MIN_FIXES:
         attrs["/provenance"]["gnss"] = f"none: {int(inside.sum())} GNSS velocities inside the selected pings"
         return case, attrs
-    case = case.replace(reference=Reference(time_s=t_ref[inside], velocity_m_s=vel, point_body_m=np.zeros(3)))
+    window = track.window_s[inside] - offset - t_abs[0]
+    averaged = bool(np.all(window[:, 1] > window[:, 0]))  # differenced positions: each velocity a mean over its fixes
+    case = case.replace(reference=Reference(time_s=t_ref[inside], velocity_m_s=vel, point_body_m=np.zeros(3),
+                                            window_s=window if averaged else None))
     attrs["/provenance"].update({
         "gnss": f"{track.source}: {track.n_fixes} GGA fixes; velocity from {track.velocity_from}",
         "clock_offset_s": offset, "clock_offset_coarse_s": coarse,
@@ -292,5 +297,8 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
         "source": "GNSS over ground, Earth frame (N, E, D), time on the ADCP clock (GNSS UTC - clock_offset_s)",
         "vertical_velocity": "0 (surface vessel; GNSS vertical not used)",
         "point_body_source": "antenna position not in the file: zeros (taken at G)",
+        "window": ("window_s: the interval between the two GGA fixes each velocity is differenced from (the velocity is "
+                   "the mean over it, stamped at its middle)" if averaged else
+                   "none: VTG velocities, instantaneous at their time stamps"),
     }
     return case, attrs

@@ -48,7 +48,7 @@ v = corrected.vessel_velocity_m_s
 print(f"corrected ({corrected.method}): vessel speed {np.nanmedian(np.hypot(v[:, 0], v[:, 1])):.3f} m/s median, "
       f"{int(np.isfinite(corrected.water_velocity_m_s[..., 0]).sum())} water cell velocities")
 
-# %% 4. Export CF-1.8 netCDF (ENU, UTC time, instrument beam numbers, provenance)
+# %% 4. Export CF-1.8 / ACDD-1.3 / IOOS-1.2 netCDF (ENU, UTC time, instrument beam numbers, provenance)
 nc_path = adcpdyn.export(imported, out / f"{case.name}_asc.nc", corrected,
                          history="docs/examples/real_file_to_netcdf.py")
 print(f"wrote {nc_path}")
@@ -59,8 +59,9 @@ print(ds)
 # cells in the bed's side-lobe layer hold the bed's echo, not water: keep those above
 # transducer + (bed - transducer) cos(beam angle), as a hydrographer's processing would
 cos_beam = np.cos(np.deg2rad(ds.attrs["instrument_beam_angle_deg"]))
-clean = ds.depth < ds.transducer_depth + (ds.sea_floor_depth - ds.transducer_depth) * cos_beam
-speed = np.hypot(ds["water_velocity_east"], ds["water_velocity_north"]).where(clean)
+transducer = ds["adcp"].attrs["transducer_depth_m"]  # the instrument's container variable
+clean = ds.depth < transducer + (ds.sea_floor_depth - transducer) * cos_beam
+speed = ds["water_speed"].where(clean)
 profile = speed.median("time")
 print(f"time {ds.time.values[0]} .. {ds.time.values[-1]} (UTC), beams {ds.beam.values.tolist()} "
       f"(case beams {ds.case_beam.values.tolist()})")

@@ -10,8 +10,10 @@ misses, which catalog effects explain it, and how far the held-out gap shrinks.
    flexible pre-fit, bottom track from the four-beam error velocity), otherwise the lowest
    residual level any fitted model reached.
 3. Forward selection: every applicable catalog effect is refitted on top of the current model
-   (warm start); the best significant one (BIC better by ``bic_margin`` and at least
-   ``min_shrink`` of the held-out gap removed) joins the model, and the next round tries the rest.
+   (warm start); of the significant ones (BIC better by ``bic_margin`` and at least
+   ``min_shrink`` of the held-out gap removed) the one that shrinks the held-out gap most joins
+   the model (:func:`preference`: one that contains another as a special case only when its
+   extra unknowns are significant), and the next round tries the rest.
    Shared effects (compass, beam angles, sound speed, latency, lever arms, installation) act on
    every run; per-run ones (moving bed, heave, forced roll) on each run separately.
 4. Confounding: an effect whose parameters share most of their variance with a base unknown (or
@@ -38,7 +40,8 @@ from ...models.effects import CATALOG, get_effect
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
-from ..calibration import ATTITUDES, choose_attitude
+from ..calibration.problem import ATTITUDES, choose_attitude
+from ..calibration.record import CalibrationRecord
 from ..hac import andrews_lags, newey_west
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  knot_times, ping_knots)
@@ -318,20 +321,16 @@ def _velocity_error(model: GapModel, fit: Fit) -> float | None:
 
 
 # ---------------------------------------------------------------------------- the base
-def _calibrated_run(calibration: dict | None, case: Case) -> dict | None:
-    return next((r for r in (calibration or {}).get("runs") or [] if r.get("case") == case.name), None)
-
-
-def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = None) -> DiagnosisBase:
+def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationRecord | None = None) -> DiagnosisBase:
     """The base of a diagnosis: the runs' attitude and navigation, the calibration's platform
     quantities pinned (or estimated from the runs), the starting noise levels."""
     runs, notes = [], []
-    timing = "deep" if calibration and str(calibration.get("timing", "")).split(",")[0] in ("deep", "exact") else "shallow"
+    timing = "deep" if calibration and calibration.timing.split(",")[0] in ("deep", "exact") else "shallow"
     for case in cases:
         af = fit_attitude(case, max_modes=config.max_modes)
-        own = _calibrated_run(calibration, case)
-        if own and own.get("attitude_model"):  # this very run was calibrated: its motion model starts the fit
-            af = dataclasses.replace(af, params=AttitudeParams.from_dict(own["attitude_model"]))
+        own = None if calibration is None else calibration.run_for(case.name)
+        if own and own.attitude_model is not None:  # this very run was calibrated: its motion model starts the fit
+            af = dataclasses.replace(af, params=own.attitude_model)
         source, reason = choose_attitude(case, af, config.attitude)
         knots = ping_knots(case) if config.navigation == "random_walk" else knot_times(case, None)
         runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason,
@@ -343,45 +342,46 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
     installation, nominal, heading, centre = ("head" if head else "estimate" if moving else "fixed"), (0.0, 0.0, 0.0), \
         ("misalignment" if head and moving else "off"), (0.0, 0.0)
     if calibration is not None:
-        angles = calibration.get("installation_ypr_rad")
         if not head:
             installation = "fixed"
-            if angles is not None and all(a is not None for a in angles):
-                nominal = tuple(float(a) for a in angles)
-                notes.append("installation angles pinned at the calibration's")
-            else:
-                nominal = tuple((calibration.get("config") or {}).get("nominal_installation_ypr_rad") or (0.0, 0.0, 0.0))
-                notes.append("installation angles not determined by the calibration: its nominal ones are used")
-        deviation = calibration.get("compass_deviation_rad")
-        d = calibration.get("heading_misalignment_rad")
+            try:
+                angles, determined = calibration.installation_or_nominal()
+            except ValueError:  # neither calibrated nor configured: level
+                angles, determined = np.zeros(3), False
+            nominal = tuple(float(a) for a in angles)
+            notes.append("installation angles pinned at the calibration's" if determined else
+                         "installation angles not determined by the calibration: its nominal ones are used")
+        d = calibration.heading_misalignment_rad
         if head and moving and d is not None:
-            if deviation and deviation.get("sin") is not None:
+            deviation = calibration.compass_deviation_rad
+            if deviation is not None and np.all(np.isfinite(deviation)):
                 heading = "deviation"
                 centre = heading_centre(runs)  # re-centre the calibration's correction on these runs' headings
-                d = d + deviation["sin"] * (centre[0] - deviation.get("mean_sin", 0.0)) + \
-                    deviation["cos"] * (centre[1] - deviation.get("mean_cos", 0.0))
-                pins.update({"compass_deviation_sin": float(deviation["sin"]), "compass_deviation_cos": float(deviation["cos"])})
+                b, c, mean_sin, mean_cos = calibration.compass_deviation_applied()
+                d = d + b * (centre[0] - mean_sin) + c * (centre[1] - mean_cos)
+                pins.update({"compass_deviation_sin": b, "compass_deviation_cos": c})
             pins["heading_misalignment"] = float(d)
             notes.append("heading misalignment (and deviation) pinned at the calibration's")
-        key = "radius_vectors_head_m" if head else "radius_vectors_m"
-        r = np.array([[np.nan if c is None else c for c in row] for row in (calibration.get(key) or [])], dtype=float)
-        if r.shape == (4, 3) and np.all(np.isfinite(r)):
+        try:
+            r = calibration.lever_arms_in("transducer" if head else "vessel")
+        except ValueError:  # not in the file, or not determined: estimated from the runs
+            r = None
+        if r is not None:
             for a, value in zip("xyz", r.mean(axis=0)):
                 pins[f"P_{a}"] = float(value)
             notes.append("lever arms pinned at the calibration's (head centre)")
-        bed = calibration.get("moving_bed_velocity_m_s")
-        calibrated_runs = {r.get("case") for r in calibration.get("runs") or []}
-        if bed is not None and None not in bed and all(c.name in calibrated_runs for c in cases) \
-                and (calibration.get("moving_bed") or {}).get("model", "constant") == "constant":
+        bed = calibration.moving_bed_velocity_m_s
+        calibrated_runs = {r.case for r in calibration.runs}
+        if bed is not None and all(c.name in calibrated_runs for c in cases) and calibration.moving_bed == "constant":
             moving_bed = "constant"  # these very runs were calibrated: their bed is the base's
             pins.update({"moving_bed_north": float(bed[0]), "moving_bed_east": float(bed[1])})
             notes.append("moving bed pinned at the calibration's (these runs were calibrated)")
         for k, case in enumerate(cases):  # a calibrated run's transducer depth, as its slant ranges gave it
-            own = _calibrated_run(calibration, case)
-            if own and own.get("transducer_depth_offset_m") is not None and runs[k].use_ranges:
+            own = calibration.run_for(case.name)
+            if own and own.transducer_depth_offset_m is not None and runs[k].use_ranges:
                 name = "transducer_depth_offset_m" if len(cases) == 1 else f"run{k + 1}/transducer_depth_offset_m"
-                pins[name] = float(own["transducer_depth_offset_m"])
-        for group, value in (calibration.get("noise_sigma") or {}).items():
+                pins[name] = own.transducer_depth_offset_m
+        for group, value in calibration.noise_sigma.items():
             if isinstance(value, (int, float)) and value > 0:
                 for k in range(len(runs)):
                     sigma0[(k, group)] = float(value)
@@ -399,7 +399,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: dict | None = N
     return DiagnosisBase(runs, spec, Pins(pins, "calibration" if calibration is not None else ""), sigma0, notes)
 
 
-def fit_base(cases, config: DiagnosisConfig, calibration: dict | None = None):
+def fit_base(cases, config: DiagnosisConfig, calibration: CalibrationRecord | None = None):
     """(base, its model, its fit, noise levels): two passes, the noise of the groups without an
     independent estimate re-estimated from the first."""
     cases = [cases] if isinstance(cases, Case) else list(cases)
@@ -585,15 +585,11 @@ def _colour_factor(model: GapModel, fit: Fit, ref_model: GapModel, ref_fit: Fit,
 
 
 # ---------------------------------------------------------------------------- main
-def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: dict | None = None,
+def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: CalibrationRecord | None = None,
              progress=None) -> DiagnosisResult:
     """Diagnose the gap between the base model and one case (or several runs of one boat), blind
-    to its truth."""
+    to its truth; with a calibration (the typed record), its platform quantities are pinned."""
     cases = [cases] if isinstance(cases, Case) else list(cases)
-    if calibration is not None:
-        from ..calibration_file import as_calibration
-
-        calibration = as_calibration(calibration)
     for case in cases:
         if case.pings.n < MIN_PINGS:
             raise ValueError(f"{case.name}: /pings/time_s: expected at least {MIN_PINGS} pings for the gap diagnosis "
@@ -702,7 +698,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
                 s.significant = bool(gain(s) < -config.bic_margin and s.shrink_fraction >= config.min_shrink
                                      and ref_gap > config.min_gap)
             scores.append(s)
-        scores.sort(key=lambda s: (not s.significant, gain(s)))
+        scores = preference(scores, gain, config.bic_margin)
         ranking += scores
         if round_ == 1:
             first_gain = {sc.effect: gain(sc) for sc in scores}
@@ -801,6 +797,24 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: di
         confounded=confounded,
         alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
+
+
+def preference(scores: list, gain, bic_margin: float) -> list:
+    """The scores in order of preference: the significant ones first, the one that predicts the
+    held-out data best (largest shrink) ahead, since two effects the BIC both accepts are told apart
+    by what they predict, not by in-sample fit under residuals whose colour is only estimated;
+    an effect that contains a significant other as a special case (``Effect.nests``) goes behind
+    it unless its extra unknowns are significant themselves (BIC better than the other's by
+    ``bic_margin``). The rest follow by BIC gain."""
+    significant = sorted((s for s in scores if s.significant), key=lambda s: -s.shrink_fraction)
+    for big in list(significant):
+        for name in get_effect(big.effect).nests:
+            small = next((s for s in significant if s.effect == name), None)
+            if small is not None and gain(big) - gain(small) > -bic_margin:
+                i, j = significant.index(big), significant.index(small)
+                if j > i:
+                    significant.insert(i, significant.pop(j))
+    return significant + sorted((s for s in scores if not s.significant), key=gain)
 
 
 LATENCY_ITERATIONS = 3

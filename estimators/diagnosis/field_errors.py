@@ -71,7 +71,7 @@ def inject(case: Case, error: str, size: float) -> Case:
         rng = None if p.bt_range_m is None else p.bt_range_m - (z / c)[:, None]
         return case.replace(pings=dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s + (w * c)[:, None], bt_range_m=rng))
     if error == "reference_latency_s":
-        return case.replace(reference=dataclasses.replace(ref, time_s=ref.time_s + size))
+        return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
     course = np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0]))
     u = size * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0])

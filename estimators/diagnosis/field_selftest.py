@@ -12,11 +12,13 @@ import time
 import numpy as np
 
 from ...cases.case import Case
+from ..calibration.record import CalibrationRecord
+from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, diagnose
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, has_moving_reference, inject
 
 
-def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig = DiagnosisConfig(),
+def field_selftest(case: Case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
                    sizes: dict | None = None, progress=None) -> dict:
     """Diagnose ``case`` clean and with every field error of ``sizes`` ({error: sizes}, default
     the field's typical ones, :data:`.field_errors.FIELD_ERRORS`) injected, blind.
@@ -43,17 +45,46 @@ def field_selftest(case: Case, calibration: dict | None, config: DiagnosisConfig
                "shrink": mine["shrink_fraction"] if mine else None, "estimate": mine["params"] if mine else None,
                "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
                "seconds": time.perf_counter() - tic, "statement": r.statement}
+        row["outcome"] = outcome(row, mine, r)
         if error == "clean":
             own = tuple(r.selected)
             own_values = {name: next(s for s in r.ranking if s["effect"] == name and s["significant"]) for name in own}
             row["own_effects"] = list(own)
-        elif expected in own:  # the file carries it already: named when its estimate moves significantly its way
-            row.update(_moved(r.given, own_values[expected], *SHIFTED_PARAMETER.get(error, (None, 0.0))))
+        elif carrier(expected, own):  # the file carries it already: named when its estimate moves significantly its way
+            mover = carrier(expected, own)
+            row.update(_moved({k: v for k, v in r.given.items() if k.split("/")[-1].startswith(mover + ".")},
+                              own_values[mover], *SHIFTED_PARAMETER.get(error, (None, 0.0))))
+            row["outcome"] = f"own effect, estimate moved {row['shift_z']:.1f} SE" + ("" if row["hit"] else " (not named)")
         rows.append(row)
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
     return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": config.navigation,
             "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+
+
+def carrier(effect: str, own) -> str | None:
+    """The file's own effect that carries ``effect``: itself, or one containing it as a special case
+    (a compass offset is the constant term of a compass deviation)."""
+    return next((o for o in own if o == effect or effect in get_effect(o).nests), None)
+
+
+def outcome(row: dict, mine: dict | None, result) -> str:
+    """Why an injected error was or was not named, in words: named; not tried (why); below what
+    this file can detect (its own effect fitted alone is not significant: the size is under the
+    file's detection limit, no choice among effects could name it); or outscored (it is
+    significant, another effect was preferred: the two are hard to tell apart on this file)."""
+    if row["expected"] == "none":
+        return "clean" if row["verdict"] == "none" else f"names {row['verdict']}"
+    if row["hit"]:
+        return "named"
+    if mine is None:
+        why = result.base.get("skipped_effects", {}).get(row["expected"], "not among the candidates")
+        return f"not tried: {why}"
+    detail = f"BIC gain {mine['delta_bic_hac'] if result.base.get('navigation') == 'random_walk' else mine['delta_bic']:.0f}, " \
+             f"shrink {100 * mine['shrink_fraction']:.0f} %"
+    if not mine["significant"]:
+        return f"below detection ({detail})"
+    return f"outscored by {row['verdict'].split('+')[0]} ({detail})"
 
 
 def _moved(given: dict, clean: dict, parameter: str | None, sign: float) -> dict:
@@ -80,8 +111,13 @@ def summarise(rows: list) -> dict:
             per.setdefault(r["error"], []).append(r)
     clean = [r for r in rows if r["error"] == "clean"]
     injected = [r for r in rows if r["error"] != "clean"]
+    detectable = [r for r in injected if not r.get("outcome", "").startswith(("below detection", "not tried"))]
     return {
         "top1": float(np.mean([r["hit"] for r in injected])) if injected else None,
+        # top-1 among the errors this file can show at all (their own effect significant when fitted alone):
+        # what is left is the choice among effects, the rest is the file's detection limit
+        "top1_detectable": float(np.mean([r["hit"] for r in detectable])) if detectable else None,
+        "n_detectable": len(detectable), "n_injected": len(injected),
         "clean_verdict": clean[0]["verdict"] if clean else None,
         "per_error": {e: {"top1": float(np.mean([r["hit"] for r in rs])),
                           "smallest_detected": min([r["size"] for r in rs if r["hit"]], default=None),
@@ -91,11 +127,11 @@ def summarise(rows: list) -> dict:
 
 def format_field_selftest(res: dict) -> str:
     """The self-test as a Markdown table and a summary line."""
-    lines = ["| error | size | verdict | named | shrink | gap (z) | s |", "|---|---:|---|---|---:|---:|---:|"]
+    lines = ["| error | size | verdict | named | why | shrink | gap (z) | s |", "|---|---:|---|---|---|---:|---:|---:|"]
     for r in res["rows"]:
         shrink = "" if r["shrink"] is None else f"{100 * r['shrink']:.0f} %"
         lines.append(f"| {r['error']} | {r['size']:g} {r['unit']} | {r['verdict']} | {'yes' if r['hit'] else 'no'} | "
-                     f"{shrink} | {r['gap']:.3f} ({r['gap_z']:.1f}) | {r['seconds']:.0f} |")
+                     f"{r.get('outcome', '')} | {shrink} | {r['gap']:.3f} ({r['gap_z']:.1f}) | {r['seconds']:.0f} |")
     s = res["summary"]
     own = res.get("own_effects") or []
     if own:
@@ -110,7 +146,8 @@ def format_field_selftest(res: dict) -> str:
                              f"{'named' if r['hit'] else 'not named'}")
     lines.append("")
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
-                 f"{100 * (s['top1'] or 0):.0f} %")
+                 f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} this file shows at all "
+                 f"(their effect significant when fitted alone): {100 * (s['top1_detectable'] or 0):.0f} %")
     for e, v in s["per_error"].items():
         smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}"
         lines.append(f"- {e}: top-1 {100 * v['top1']:.0f} %, smallest detected {smallest}")
@@ -130,11 +167,11 @@ def write_field_selftest(res: dict, json_path, fmt: str = "png") -> list:
     import matplotlib.pyplot as plt
 
     from ...cases.atomic import atomic_path
-    from ..calibration import _jsonable
+    from ..calibration.result import jsonable
 
     json_path = Path(json_path)
     with atomic_path(json_path) as tmp, open(tmp, "w") as fh:
-        json.dump(_jsonable(res), fh, indent=2)
+        json.dump(jsonable(res), fh, indent=2)
     md = json_path.with_suffix(".md")
     with atomic_path(md) as tmp:
         Path(tmp).write_text(f"# Field errors injected into {res.get('case', 'the file')}\n\n" + format_field_selftest(res) + "\n")

@@ -10,14 +10,14 @@ from pathlib import Path
 import numpy as np
 
 from ...cases.atomic import atomic_path
-from ..calibration import _jsonable
+from ..calibration.result import jsonable
 from .model import noise_key
 
 
 def write_json(result, path) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "w") as fh:
-            json.dump(_jsonable(result.to_dict()), fh, indent=2)
+            json.dump(jsonable(result.to_dict()), fh, indent=2)
 
 
 def table(result, n_where: int = 6) -> str:

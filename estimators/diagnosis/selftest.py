@@ -101,14 +101,16 @@ def oracle_shrink(result, label: str, params: dict, config: DiagnosisConfig) -> 
 CALIBRATION_STARTS = 8  # multistart of the calibrated self-test's calibration runs
 
 
-def calibration_of(platform: str, slow_attitude: bool, ar1: float, sim_seed: int) -> dict:
+def calibration_of(platform: str, slow_attitude: bool, ar1: float, sim_seed: int):
     """The paper's workflow: the platform calibrated on an effect-free run of its own (another
-    noise seed, another case name, so no run-specific number of it is pinned in the diagnosis)."""
-    from ..calibration import CalibrationConfig, calibrate
+    noise seed, another case name, so no run-specific number of it is pinned in the diagnosis),
+    as the typed record a diagnosis reads."""
+    from ..calibration.problem import CalibrationConfig, calibrate
+    from ..calibration.record import as_record
 
     case = simulate(platform_scenario(platform, slow_attitude, ar1), seed=(sim_seed + 7919) % (2**31 - 1))
     case = dataclasses.replace(case, name=case.name + "_calibration", truth=None)
-    return calibrate(case, CalibrationConfig(n_starts=CALIBRATION_STARTS)).to_dict()
+    return as_record(calibrate(case, CalibrationConfig(n_starts=CALIBRATION_STARTS)))
 
 
 def run_one(label: str, params: dict, sim_seed: int, platform: str, config: DiagnosisConfig,

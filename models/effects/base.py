@@ -36,6 +36,7 @@ class Effect:
     timing: str | None = None  # "deep" when the effect is the two-way timing itself
     needs_reference: bool = False  # observable only with a moving reference velocity
     needs_rotation: bool = False
+    nests: tuple = ()  # effects this one contains as a special case (its extra unknowns at zero)
 
     # ------------------------------------------------------------ parameters
     def _overrides(self, *hooks) -> bool:

@@ -19,6 +19,7 @@ class CompassDeviation(Effect):
         Parameter("C_rad", 0.02, -0.5, 0.5, draw=(1.5 * DEG, 4.0 * DEG)),
     )
     needs_reference = True
+    nests = ("compass_offset",)  # B = C = 0
 
     def wrap_attitude_sensor(self, read, params):
         def deviated(t):

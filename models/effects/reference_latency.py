@@ -20,7 +20,7 @@ class ReferenceLatency(Effect):
         ref = case.reference
         if ref is None or ref.time_s is None or ref.stationary:
             return case
-        return dataclasses.replace(case, reference=dataclasses.replace(ref, time_s=ref.time_s + params["delay_s"]))
+        return dataclasses.replace(case, reference=ref.shifted(params["delay_s"]))
 
     def reference_velocity(self, v, ctx, th):
         # the antenna's velocity at t - d, to first order about the current estimate d0 (the navigation,

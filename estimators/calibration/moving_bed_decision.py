@@ -21,7 +21,7 @@ SIGNIFICANCE = 0.01  # chi-square (2 dof) test of the bed velocity against zero
 def mean_flow_speed(cases) -> float | None:
     """Mean horizontal water speed over the runs' valid cells (static correction, bottom-track
     referenced), or None without a water profile."""
-    from .asc import asc
+    from ..asc import asc
 
     speeds = []
     for case in cases:

@@ -8,9 +8,9 @@ Every problem is a one-line ``ValueError``::
     calibration FILE: KEY: expected ..., got ...
 
 ``null`` means "not determined": it is accepted wherever the table allows it, and the
-accessors below (:func:`lever_arms`, :func:`installation_angles`, ...) refuse in one
-line only when a reader needs that value. Unknown keys are ignored (later versions may
-add keys). Files without ``schema_version`` are version 1; versions 1 and 2 are read.
+typed record (:class:`~adcpdyn.estimators.calibration.record.CalibrationRecord`) refuses it
+in one line only when a reader needs that value. Unknown keys are ignored (later versions
+may add keys). Files without ``schema_version`` are version 1; versions 1 to 3 are read.
 
 To accept a new key, add one line to :data:`KEYS`.
 """
@@ -19,16 +19,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-__all__ = ["KEYS", "SCHEMA_VERSIONS", "Calibration", "read_calibration", "validate_calibration", "as_calibration", "lever_arms",
-           "installation_angles", "nominal_installation", "heading_misalignment", "moving_bed_velocity",
-           "attitude_model_from", "calibration_source"]
+__all__ = ["KEYS", "SCHEMA_VERSIONS", "Calibration", "read_calibration", "validate_calibration", "calibration_from_dict",
+           "attitude_model_from", "source_prefix"]
 
 SCHEMA_VERSIONS = (1, 2, 3)
 MAX_LEVER_ARM_M = 100.0  # a transducer 100 m from the centre of rotation: no vessel carries one
@@ -331,12 +329,8 @@ def _check(spec: Key, value, path: str, fail) -> None:
         spec.check(value, path, fail)
 
 
-def calibration_source(calibration) -> str:
-    """The file a calibration came from ('' for a dict made in memory)."""
-    return getattr(calibration, "source", "") or ""
-
-
-def _prefix(source: str) -> str:
+def source_prefix(source: str) -> str:
+    """How a one-line error names a calibration: ``calibration FILE: `` (``calibration: `` in memory)."""
     return f"calibration {source}: " if source else "calibration: "
 
 
@@ -355,8 +349,8 @@ def validate_calibration(d, source: str = "") -> Calibration:
     ValueError
         ``calibration SOURCE: KEY: expected ..., got ...`` on the first problem.
     """
-    source = source or calibration_source(d)
-    head = _prefix(source)
+    source = source or getattr(d, "source", "") or ""
+    head = source_prefix(source)
 
     def fail(path, expected, got):
         expected = expected if expected.startswith("expected") else f"expected {expected}"
@@ -389,28 +383,17 @@ def _plain(obj):
     return obj
 
 
-def as_calibration(d) -> Calibration:
-    """A calibration in any form it is handed over in, validated once: a :class:`Calibration` as
-    it is; a CALIB.json path read (:func:`read_calibration`); an object with ``to_dict()`` (a
-    ``CalibrationResult``, its CALIB.json form; a ``CalibrationRecord``, its validated file) or
-    any other dict with the writer's convention (numpy values as numbers, NaN and infinities as
-    null: not determined). A file is stricter: NaN or Infinity there is an error.
+def calibration_from_dict(d, source: str = "") -> Calibration:
+    """A calibration handed over as a dict, validated: with the writer's convention (numpy values
+    as numbers, NaN and infinities as null: not determined; a file is stricter, NaN or Infinity
+    there is an error); a :class:`Calibration` as it is.
 
     Raises
     ------
     ValueError
-        One line naming the key; or naming ``calibration`` for an object of another type.
+        One line naming the key.
     """
-    if isinstance(d, Calibration):
-        return d
-    if isinstance(d, (str, os.PathLike)):
-        return read_calibration(Path(d))
-    if not isinstance(d, dict) and callable(getattr(d, "to_dict", None)):
-        d = d.to_dict()
-    if not isinstance(d, dict):
-        raise ValueError(f"calibration: expected a CALIB.json path, a dict, a CalibrationResult or a CalibrationRecord, "
-                         f"got {type(d).__name__}")
-    return d if isinstance(d, Calibration) else validate_calibration(_plain(d))
+    return d if isinstance(d, Calibration) else validate_calibration(_plain(d), source)
 
 
 def read_calibration(path) -> Calibration:
@@ -423,7 +406,7 @@ def read_calibration(path) -> Calibration:
         object, or a key of the wrong type, shape or range (:func:`validate_calibration`).
     """
     source = str(path)
-    head = _prefix(source)
+    head = source_prefix(source)
     try:
         raw = Path(path).read_bytes()
     except OSError as exc:
@@ -446,51 +429,11 @@ def read_calibration(path) -> Calibration:
     return validate_calibration(d, source)
 
 
-# ---------------------------------------------------------------------------- accessors
-def _need(calibration, key: str, purpose: str):
-    value = calibration.get(key)
-    if key not in calibration:
-        raise ValueError(f"{_prefix(calibration_source(calibration))}{key}: missing; expected the output of "
-                         f"`adcpdyn calibrate` ({purpose})")
-    return value
-
-
-def lever_arms(calibration, frame: str, purpose: str = "this calibration cannot correct") -> np.ndarray:
-    """The (4, 3) lever arms in the attitude sensor's frame: ``radius_vectors_head_m`` for a
-    head sensor (``frame="transducer"``), else ``radius_vectors_m``; a one-line error when
-    missing or not determined (null)."""
-    key = "radius_vectors_head_m" if frame == "transducer" else "radius_vectors_m"
-    value = _need(calibration, key, purpose)
-    a = np.array([[np.nan if x is None else x for x in row] for row in value] if value is not None else np.full((4, 3), np.nan),
-                 dtype=float)
-    if np.any(~np.isfinite(a)):
-        raise ValueError(f"{_prefix(calibration_source(calibration))}{key}: contains undetermined (null) values; "
-                         f"{purpose}")
-    return a
-
-
-def installation_angles(calibration) -> np.ndarray:
-    """The installation (yaw, pitch, roll) in radians, or a one-line error when missing or not determined."""
-    value = calibration.get("installation_ypr_rad")
-    if value is None or any(v is None for v in value):
-        raise ValueError(f"{_prefix(calibration_source(calibration))}installation_ypr_rad: missing or not determined; "
-                         "expected 3 angles in radians")
-    return np.asarray(value, dtype=float)
-
-
-def nominal_installation(calibration) -> np.ndarray:
-    """The nominal installation angles of the calibration's configuration (the mounting as set up)."""
-    value = (calibration.get("config") or {}).get("nominal_installation_ypr_rad")
-    if value is None or any(v is None for v in value):
-        raise ValueError(f"{_prefix(calibration_source(calibration))}installation_ypr_rad is not determined and "
-                         "config.nominal_installation_ypr_rad is missing; expected 3 angles in radians")
-    return np.asarray(value, dtype=float)
-
-
+# ---------------------------------------------------------------------------- the attitude model (also in a case's /truth)
 def attitude_model_from(value, where: str):
     """An ``AttitudeParams`` from its dict (``AttitudeParams.to_dict``) or JSON text, checked as
     CALIB.json's ``attitude_model`` is; ``where`` names it in the one-line error."""
-    from ..models.motion import AttitudeParams
+    from ...models.motion import AttitudeParams
 
     if isinstance(value, (str, bytes)):
         try:
@@ -504,30 +447,3 @@ def attitude_model_from(value, where: str):
 
     _check(Key("object", nulls=NONE, check=_attitude_model), value, "attitude_model", fail)
     return AttitudeParams.from_dict(value)
-
-
-def moving_bed_velocity(calibration, case_name: str) -> tuple[np.ndarray | None, str]:
-    """The bed velocity (north, east) a calibration found under a case's pings, and where it came
-    from: the case's own entry of ``runs``, else the calibration's site bed, else ``(None, "")``
-    (no bed estimated, or a component not determined: null)."""
-    def vector(value):
-        return None if value is None or any(v is None for v in value) else np.asarray(value, dtype=float)
-
-    if calibration is None:
-        return None, ""
-    own = next((r for r in calibration.get("runs") or [] if r.get("case") == case_name), None)
-    if own is not None and vector(own.get("moving_bed_velocity_m_s")) is not None:
-        return vector(own["moving_bed_velocity_m_s"]), f"run {case_name!r} of the calibration"
-    bed = vector(calibration.get("moving_bed_velocity_m_s"))
-    if bed is None:
-        return None, ""
-    why = "this case is not one of its runs" if own is None else "this run's own is not determined"
-    return bed, f"the calibration's site bed ({why})"
-
-
-def heading_misalignment(calibration) -> float | None:
-    """The heading misalignment in radians, or None when absent or not determined."""
-    if calibration is None:
-        return None
-    value = calibration.get("heading_misalignment_rad")
-    return None if value is None else float(value)

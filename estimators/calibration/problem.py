@@ -30,19 +30,19 @@ import casadi as ca
 import numpy as np
 from scipy.stats import qmc
 
-from ..cases.case import Case
-from ..cases.identity import identity_of, instrument_difference, site_differences, site_of
-from ..models.motion import AttitudeParams, evaluate_attitude
-from ..models.rotations import euler_matrix
-from ..solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
-from .attitude_fit import AttitudeFit, autocorrelation, fit_attitude
-from .calibration_result import CalibrationResult, RunResult, jsonable
-from .formulations import FORMULATIONS
-from .hac import sandwich
+from ...cases.case import Case
+from ...cases.identity import identity_of, instrument_difference, site_differences, site_of
+from ...models.motion import AttitudeParams, evaluate_attitude
+from ...models.rotations import euler_matrix
+from ...solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
+from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
+from ..formulations import FORMULATIONS
+from ..hac import sandwich
+from ..measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
+                                 heading_span, knot_times)
+from ..uncertainty import uncertainty
 from .moving_bed_decision import mean_flow_speed, moving_bed_test
-from .measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
-                                heading_span, knot_times)
-from .uncertainty import uncertainty
+from .result import CalibrationResult, RunResult
 
 TIMINGS = ("auto", "shallow", "deep", "exact")
 ATTITUDES = ("auto", "model", "samples")
@@ -63,7 +63,6 @@ DEVIATION_CHOICES = ("auto", "on", "off")
 SE_METHODS = ("hac", "white")
 MIN_HEADING_SPAN = 0.1  # heading_span above which the one-cycle compass deviation is estimated (0.5: all round)
 CONFOUNDED_R2 = 0.9  # share of a yaw's variance explained by the bed's: the two are not told apart
-_jsonable = jsonable  # kept for callers of the earlier name
 
 
 @dataclass(frozen=True)
@@ -120,7 +119,7 @@ class CalibrationConfig:
     moving_bed : str
         The bed moving under the bottom track (bed load; the reference does not see it):
         ``auto`` (with a moving reference a constant bed, kept only when the data say it moves:
-        :func:`~adcpdyn.estimators.moving_bed_decision.moving_bed_test`, reported in
+        :func:`~adcpdyn.estimators.calibration.moving_bed_decision.moving_bed_test`, reported in
         ``moving_bed_test``; else ``off``), ``off`` (a bed verified
         fixed, e.g. by a loop or stationary test), ``constant`` (one velocity, north and east,
         shared by the runs) or ``section`` (a piecewise-linear function of the position along
@@ -400,7 +399,7 @@ class CalibrationProblem:
     @staticmethod
     def _empirical_params(case: Case, fit: AttitudeFit) -> AttitudeParams | None:
         """The pre-fit with its strongest mode's frequency and decay from the hull figures (Eqs. 36-47)."""
-        from ..models.empirical import motion_guess
+        from ...models.empirical import motion_guess
 
         v = case.vessel
         p = fit.params
@@ -680,7 +679,7 @@ class CalibrationProblem:
         """The site's magnetic declination: given, else IGRF at each run's position and time (their
         circular mean: one site), else unknown with the reason; and a warning when the runs'
         declinations spread wider than one site's."""
-        from ..cases.site import case_declination
+        from ...cases.site import case_declination
 
         if self.config.magnetic_declination_rad is not None:
             return float(self.config.magnetic_declination_rad), "given (CalibrationConfig.magnetic_declination_rad)", []

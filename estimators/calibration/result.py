@@ -19,10 +19,10 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..cases.identity import InstrumentIdentity, Site
-from ..models.motion import AttitudeParams
-from ..solvers.multistart import MultistartResult
-from .uncertainty import Uncertainty
+from ...cases.identity import InstrumentIdentity, Site
+from ...models.motion import AttitudeParams
+from ...solvers.multistart import MultistartResult
+from ..uncertainty import Uncertainty
 
 SCHEMA_VERSION = 3
 
@@ -252,7 +252,7 @@ class CalibrationResult:
         """Write CALIB.json atomically, its ``provenance`` stamped with the UTC time of writing."""
         import datetime as dt
 
-        from ..cases.atomic import atomic_path
+        from ...cases.atomic import atomic_path
 
         d = self.to_dict()
         d["provenance"]["written_utc"] = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -264,7 +264,7 @@ class CalibrationResult:
     def from_json(cls, path):
         """Read a CALIB.json back as a typed, read-only record.
 
-        Returns a :class:`~adcpdyn.estimators.calibration_record.CalibrationRecord`, not a
+        Returns a :class:`~adcpdyn.estimators.calibration.record.CalibrationRecord`, not a
         ``CalibrationResult``: a CALIB.json holds the estimates, their standard errors, the
         attitude model and source, the noise levels, each run's bed and the provenance (all
         typed on the record), but not the solver's objects (multistart, uncertainty,
@@ -276,14 +276,14 @@ class CalibrationResult:
         ValueError
             One line naming the file and the key (an unreadable or invalid file).
         """
-        from .calibration_record import CalibrationRecord
+        from .record import CalibrationRecord
 
         return CalibrationRecord.from_json(path)
 
 
 def provenance_block(result) -> dict:
     """CALIB.json's ``provenance``: the adcpdyn version and what the result says it came from."""
-    from ..cases.hashing import adcpdyn_version
+    from ...cases.hashing import adcpdyn_version
 
     cases = result.provenance.get("cases") or [{"name": r.case} for r in result.runs]
     return jsonable({"adcpdyn_version": adcpdyn_version(), **result.provenance, "cases": cases})

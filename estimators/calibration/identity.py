@@ -8,13 +8,14 @@ it is, and is applied with a note saying so.
 
 from __future__ import annotations
 
-from ..cases.identity import InstrumentIdentity, Site, identity_of, instrument_difference, site_differences, site_of
+from ...cases.identity import identity_of, instrument_difference, site_differences, site_of
+from .record import CalibrationRecord
 
 OVERRIDE_FLAG = "--accept-other-instrument"
 
 
-def check_calibration_identity(calibration: dict | None, case, accept_other_instrument: bool = False) -> list:
-    """Notes on applying ``calibration`` (a validated CALIB.json dict) to ``case``.
+def check_calibration_identity(calibration: CalibrationRecord | None, case, accept_other_instrument: bool = False) -> list:
+    """Notes on applying ``calibration`` to ``case``.
 
     Raises
     ------
@@ -24,12 +25,12 @@ def check_calibration_identity(calibration: dict | None, case, accept_other_inst
     """
     if calibration is None:
         return []
-    source = getattr(calibration, "source", "") or "the calibration"
-    if not calibration.get("instrument"):
+    source = calibration.source or "the calibration"
+    theirs = calibration.instrument
+    if theirs is None:
         return [f"{source} does not say which instrument it calibrated (written before schema 3): applied to "
                 f"{case.name} unchecked"]
-    theirs, mine = InstrumentIdentity.from_dict(calibration["instrument"]), identity_of(case)
-    notes = []
+    notes, mine = [], identity_of(case)
     why = instrument_difference(theirs, mine)
     if why:
         text = (f"{source} calibrated {theirs.label()}, but {case.name} was measured with {mine.label()} ({why}): "
@@ -37,8 +38,8 @@ def check_calibration_identity(calibration: dict | None, case, accept_other_inst
         if not accept_other_instrument:
             raise ValueError(f"calibration: {text}; pass {OVERRIDE_FLAG} to apply it anyway")
         notes.append(f"{text}, applied anyway ({OVERRIDE_FLAG})")
-    if calibration.get("site"):
-        far = site_differences(Site.from_dict(calibration["site"]), site_of([case]))
+    if calibration.site is not None:
+        far = site_differences(calibration.site, site_of([case]))
         if far:
             notes.append(f"{source} was made where and when {case.name} was not ({', '.join(far)}): an installation "
                          "remounted or a compass re-swung since would not show in it")

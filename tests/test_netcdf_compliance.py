@@ -1,0 +1,128 @@
+"""netCDF exports under the IOOS compliance-checker (cf:1.8, acdd:1.3, ioos:1.2), and the attribution
+file that supplies what no instrument file holds (creator, publisher, licence, naming authority)."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import pytest
+from conftest import real
+
+from adcpdyn import api
+from adcpdyn.benchmarks.compliance import SUITES, TARGET_PERCENT, checker_scores
+from adcpdyn.cases.attribution import Attribution, read_attribution
+from adcpdyn.cli import main
+
+xr = pytest.importorskip("xarray")
+ATTRIBUTION = Path(__file__).resolve().parents[1] / "docs" / "examples" / "attribution.toml"
+
+
+def _exports(case_path: Path, tmp_path: Path) -> list[Path]:
+    """The case and its static correction as netCDF, with the example attribution."""
+    case_nc, corrected_nc = tmp_path / f"{case_path.stem}_case.nc", tmp_path / f"{case_path.stem}_asc.nc"
+    assert main(["export", str(case_path), "--out", str(case_nc), "--attribution", str(ATTRIBUTION)]) == 0
+    assert main(["correct", str(case_path), "--out", str(corrected_nc), "--attribution", str(ATTRIBUTION)]) == 0
+    return [case_nc, corrected_nc]
+
+
+def _assert_passes(path: Path) -> None:
+    scores = checker_scores(path)
+    low = {s: f"{v.scored}/{v.possible}" for s, v in scores.items() if v.percent < TARGET_PERCENT}
+    assert set(scores) == set(SUITES) and not low, (path.name, low)
+
+
+def test_a_simulated_export_with_dates_and_positions_passes_the_checker(tmp_path):
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    for path in _exports(case_path, tmp_path):
+        _assert_passes(path)
+
+
+def test_a_real_export_passes_the_checker(tmp_path):
+    case_path = tmp_path / "rp.h5"
+    api.import_file(real("RiverPro_test01.PD0"), out=case_path)
+    for path in _exports(case_path, tmp_path):
+        _assert_passes(path)
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            assert ds.attrs["featureType"] == "trajectoryProfile" and ds["vessel"].attrs["cf_role"] == "trajectory_id"
+            assert Path(ds.attrs["source_file"]).is_absolute() and Path(ds.attrs["source_case_file"]).is_absolute()
+
+
+def test_an_undated_simulated_export_passes_cf_with_no_high_priority_failure(tmp_path):
+    """No UTC origin: no invented date, so no failed CF time check (was: time in s with no reference date)."""
+    case_path = tmp_path / "ship.h5"
+    api.simulate("deep_ship", seed=1, out=case_path)
+    for path in (tmp_path / "case.nc", tmp_path / "asc.nc"):
+        if path.stem == "case":
+            api.export(case_path, path)
+        else:
+            api.correct(case_path, "asc", out=path)
+        cf = checker_scores(path, ["cf:1.8"])["cf:1.8"]
+        assert cf.percent >= TARGET_PERCENT and cf.high_failed == 0, (path.name, cf)
+
+
+def test_the_checker_check_can_fail(tmp_path):
+    """Without the discovery attributes the same export falls below the target: the assertion above bites."""
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    ds = api.to_xarray(case_path, attribution=ATTRIBUTION)
+    for key in ("title", "summary", "keywords", "creator_email", "publisher_url", "time_coverage_start", "featureType"):
+        del ds.attrs[key]
+    for var in ds.variables.values():
+        var.attrs.pop("coverage_content_type", None)
+    from adcpdyn.cases.netcdf import write_netcdf
+
+    write_netcdf(ds, tmp_path / "bare.nc")
+    scores = checker_scores(tmp_path / "bare.nc")
+    assert scores["acdd:1.3"].percent < TARGET_PERCENT and scores["ioos:1.2"].percent < TARGET_PERCENT
+
+
+def test_attribution_is_written_and_what_is_not_stated_says_so(tmp_path):
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    stated = read_attribution(ATTRIBUTION)
+    with_it = api.to_xarray(case_path, attribution=stated).attrs
+    without = api.to_xarray(case_path).attrs
+    assert with_it["creator_email"] == stated.creator_email and with_it["license"] == stated.license
+    assert without["creator_name"] == "not stated" and without["license"] == "not stated"
+    assert "creator_email" not in without and "infoUrl" not in without  # never invented
+    assert without["creator_sector"] == "unknown" and with_it["id"] == without["id"]  # the id: of the data
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"creator_email": "nobody"}, "creator_email: expected an e-mail address"),
+    ({"infoUrl": "example.org"}, "infoUrl: expected an http(s) URL"),
+    ({"creator_sector": "private"}, "creator_sector: expected one of"),
+    ({"contributor_role": "helper"}, "contributor_role: expected roles from"),
+    ({"naming_authority": "example"}, "naming_authority: expected reverse DNS"),
+    ({"platform": "research vessel", "platform_vocabulary": "https://vocab.nerc.ac.uk/collection/L06/current/"},
+     "platform: expected one word"),
+    ({"platform": "ship"}, "platform, platform_vocabulary: expected both"),
+    ({"creator_postalcode": 12345}, "creator_postalcode: expected a non-empty string"),
+])
+def test_bad_attribution_values_are_refused_in_one_line(tmp_path, change, words):
+    with pytest.raises(ValueError, match=re.escape(words)):
+        dataclasses.replace(read_attribution(ATTRIBUTION), **change)
+    text = "".join(f"{k} = {v!r}\n".replace("'", '"') for k, v in change.items())
+    (tmp_path / "a.toml").write_text(text)
+    with pytest.raises(ValueError, match=f"^--attribution: a.toml: {re.escape(words)}") as err:
+        read_attribution(tmp_path / "a.toml")
+    assert "\n" not in str(err.value)
+
+
+def test_attribution_file_errors_and_misplaced_option(tmp_path, capsys):
+    (tmp_path / "a.toml").write_text('creator = "me"\n')
+    with pytest.raises(ValueError, match=r"^--attribution: a.toml: unknown attribute\(s\) \['creator'\]"):
+        read_attribution(tmp_path / "a.toml")
+    (tmp_path / "b.toml").write_text("creator_name = \n")
+    with pytest.raises(ValueError, match=r"^--attribution: .*b.toml: expected TOML"):
+        read_attribution(tmp_path / "b.toml")
+    case_path = tmp_path / "c.h5"
+    api.simulate("pool_still", seed=1, out=case_path)
+    assert main(["correct", str(case_path), "--out", str(tmp_path / "c_asc.h5"), "--attribution", str(ATTRIBUTION)]) == 2
+    err = capsys.readouterr().err
+    assert "--attribution: only with one case and --out OUT.nc" in err and err.count("\n") == 1
+    with pytest.raises(ValueError, match=r"^attribution: only with out=OUT.nc"):
+        api.correct(case_path, "asc", attribution=Attribution())
