@@ -45,6 +45,27 @@ def progress_enabled() -> bool:
         return False
 
 
+def warn(text: str) -> None:
+    """A warning line on stderr (stdout keeps the results a script reads)."""
+    print(f"warning: {text}", file=sys.stderr)
+
+
+NOISE_UNITS = {"bt": "m/s", "reference": "m/s", "vertical": "m/s", "range": "m", "motion": "m/s/sqrt(s)"}
+
+
+def noise_levels_line(sigma: dict) -> str:
+    """The noise levels with their units: angles in degrees, velocities in m/s, ranges in m."""
+    parts = []
+    for k, v in sigma.items():
+        if v is None:
+            continue
+        if k in ("heading", "pitch", "roll"):
+            parts.append(f"{k} {np.degrees(v):.3g} deg")
+        else:
+            parts.append(f"{k} {v:.3g} {NOISE_UNITS.get(k, '')}".rstrip())
+    return "noise levels (one standard deviation): " + ", ".join(parts)
+
+
 class _Progress:
     """One stderr line per step, with the seconds since the command started: ``adcpdyn VERB: [  12.3 s] TEXT``."""
 
@@ -168,7 +189,7 @@ def cmd_import(args) -> int:
         print(f"GNSS: {prov.get('gnss', 'none')}")
     warning = attrs.get("/attitude", {}).get("attitude_warning")
     if warning:
-        print(f"warning: attitude: {warning}")
+        warn(f"attitude: {warning}")
     if prov.get("reader_messages"):
         print(f"note: {prov['reader_messages']}")
     return 0
@@ -182,13 +203,13 @@ def cmd_info(args) -> int:
     case = _read(args.case)
     print(summarise(case))
     for w in case_warnings(case):
-        print(f"warning: {w}")
+        warn(f"{w}")
     try:
         note = restrict_to_coverage(case, source=str(args.case))[1]
     except ValueError as exc:  # info still describes the file; the verbs that use the attitude will refuse it
         note = f"{exc} (correct, compare, calibrate and diagnose refuse this case)"
     if note:
-        print(f"warning: {note}")
+        warn(f"{note}")
     return 0
 
 
@@ -205,7 +226,7 @@ def _prepare(path, say: bool = True):
         notes.append(note)
     if say:
         for w in notes:
-            print(f"warning: {w}")
+            warn(f"{w}")
     return case, notes
 
 
@@ -290,7 +311,7 @@ def cmd_correct(args) -> int:
                      out=args.out, history=command, accept_other_instrument=args.accept_other_instrument,
                      attribution=args.attribution)
     for w in result.provenance.warnings:
-        print(f"warning: {w}")
+        warn(f"{w}")
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
     print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
@@ -301,7 +322,7 @@ def cmd_correct(args) -> int:
         print(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
               f"referenced to {'the bottom track' if result.provenance.water_reference == 'bt' else 'the GNSS'}")
     if result.provenance.installation_note:
-        print(f"warning: {result.provenance.installation_note}")
+        warn(f"{result.provenance.installation_note}")
     if result.provenance.moving_bed_note:
         print(f"note: {result.provenance.moving_bed_note}")
     return 0
@@ -338,7 +359,7 @@ def cmd_compare(args) -> int:
     comparison = compare(args.case, args.calibration, out=args.out, fmt=args.format,
                          accept_other_instrument=args.accept_other_instrument)
     for w in comparison.warnings:
-        print(f"warning: {w}")
+        warn(f"{w}")
     print(f"{comparison.case}: vessel velocity against {comparison.against_text}")
     print(comparison.format_table())
     for m, why in comparison.not_run.items():
@@ -410,9 +431,9 @@ def _print_calibration(result, title: str) -> None:
         worst = max(inflation, key=inflation.get)
         print(f"standard errors: {result.standard_errors['method']} (Newey-West lags {result.standard_errors['lags']}); "
               f"largest inflation over white noise x{inflation[worst]:.2f} ({worst})")
-    print("noise sigma: " + ", ".join(f"{k} {v:.4g}" for k, v in result.noise_sigma.items() if v is not None))
+    print(noise_levels_line(result.noise_sigma))
     for w in result.warnings:
-        print(f"warning: {w}")
+        warn(f"{w}")
 
 
 def cmd_calibrate(args) -> int:
@@ -499,7 +520,7 @@ def cmd_demo(args) -> int:
         print(f"  r{i + 1} ({label} frame, m): " + "  ".join(
             f"{v:+.4f} +- {s:.4f}" for v, s in zip(calib.lever_arms_sensor_m[i], calib.lever_arms_sensor_se_m[i])))
     for w in calib.warnings:
-        print(f"  warning: {w}")
+        warn(f"{w}")
     err = calibration_errors(calib_case, calib)
     print(f"  tangential radial velocity along the true motion: {1e3 * err['tangential_radial_rms_m_s']:.2f} mm/s RMS "
           f"error (signal {1e3 * err['tangential_radial_signal_rms_m_s']:.1f} mm/s)")
@@ -570,7 +591,7 @@ def cmd_diagnose(args) -> int:
                       accept_other_instrument=args.accept_other_instrument)
     progress(f"done: verdict {result.verdict}")
     for w in result.base.get("case_warnings", []):
-        print(f"warning: {w}")
+        warn(f"{w}")
     written = write_report(result, args.out, fmt=args.format)
     print(table(result))
     print("wrote " + ", ".join(str(p) for p in written))
@@ -610,7 +631,7 @@ def _diagnose_selftest(args) -> int:
     platforms = tuple(args.platforms) if args.platforms else None
     draws = draw_cases(args.selftest, args.seed, config.effects, **({"platforms": platforms} if platforms else {}))
     rows = []
-    for label, params, seed, platform, slow, ar1 in tqdm(draws, desc="self-test", unit="case"):
+    for label, params, seed, platform, slow, ar1 in tqdm(draws, desc="self-test", unit="case", disable=not progress_enabled()):
         rows.append(run_one(label, params, seed, platform, config, slow, ar1, calibrated=args.selftest_calibrated))
         r = rows[-1]
         tqdm.write(f"{platform:>14s} {r['expected']:>26s} -> {r['verdict']:<34s} gap {r['gap_before']:.3f} -> "

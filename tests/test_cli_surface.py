@@ -203,3 +203,13 @@ def test_contradicting_options_and_wrong_files_are_refused_in_one_line_naming_th
         err = capsys.readouterr().err.strip()
         assert words in err and len(err.splitlines()) == 1, (argv, err)
         assert not list(tmp_path.glob("out*")), argv
+
+
+def test_noise_levels_are_printed_with_their_units():
+    import numpy as np
+
+    from adcpdyn.cli import noise_levels_line
+
+    line = noise_levels_line({"heading": float(np.radians(0.5)), "bt": 0.0637, "range": 0.396, "reference": None,
+                              "motion": 0.19})
+    assert line == "noise levels (one standard deviation): heading 0.5 deg, bt 0.0637 m/s, range 0.396 m, motion 0.19 m/s/sqrt(s)"
