@@ -289,3 +289,12 @@ def test_preference_keeps_the_nested_effect_unless_the_extra_unknowns_are_signif
     assert preference(barely, gain, 10.0)[0].effect == "compass_offset"
     clearly = [_score("compass_deviation", 0.60, -120.0), _score("compass_offset", 0.25, -62.0)]
     assert preference(clearly, gain, 10.0)[0].effect == "compass_deviation"
+
+
+def test_an_unknown_stopped_at_its_bound_is_flagged():
+    from adcpdyn.estimators.diagnosis.diagnose import at_bounds
+
+    lo = next(q.lower for q in get_effect("compass_deviation").parameters if q.name == "C_rad")
+    values = {"compass_deviation.A_rad": 0.01, "compass_deviation.C_rad": lo}
+    assert at_bounds("compass_deviation", values) == ["compass_deviation.C_rad"]
+    assert at_bounds("compass_deviation", {"compass_deviation.C_rad": lo + 1e-3}) == []

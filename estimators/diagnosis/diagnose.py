@@ -133,6 +133,7 @@ class EffectScore:
     confounded_with: list = field(default_factory=list)
     confounded_share: float = 0.0
     round: int = 1
+    at_bound: list = field(default_factory=list)  # unknowns stopped at a bound of their range: not determined there
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -550,11 +551,25 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, noise, n_obs, conf
     return EffectScore(
         colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
-        p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else (1.0 if dll <= 0 else 0.0),
+        # an effect without unknowns is not nested in the model it replaces: no likelihood-ratio test, the BIC compares
+        p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else float("nan"),
+        at_bound=at_bounds(name, {n: float(fit.x[model.names.index(n)]) for n in mine}),
         n_params=k, params={n: float(fit.x[model.names.index(n)]) for n in mine},
         params_se={n: float(se[model.names.index(n)]) for n in mine}, gap_after=float(gap_after),
         shrink_fraction=float(shrink), velocity_error_m_s=_velocity_error(model, fit), success=fit.success,
         status=fit.status, iterations=fit.iterations, round=round_)
+
+
+def at_bounds(effect: str, values: dict) -> list:
+    """The effect's unknowns (full names) whose estimate sits on a bound of the effect's range: the
+    data pushed them there, so their value and its standard error say nothing."""
+    ranges = {q.name: (q.lower, q.upper) for q in get_effect(effect).parameters}
+    out = []
+    for name, v in values.items():
+        lo, hi = ranges.get(name.rsplit(".", 1)[-1], (-np.inf, np.inf))
+        if min(abs(v - lo), abs(v - hi)) <= 1e-6 * max(1.0, abs(v)):
+            out.append(name)
+    return out
 
 
 def _colour_factor(model: GapModel, fit: Fit, ref_model: GapModel, ref_fit: Fit, noise: dict) -> float:

@@ -38,10 +38,13 @@ def table(result, n_where: int = 6) -> str:
               "| effect | delta LL | delta BIC | p-value | gap after | shrink | significant | parameters (± SE) | solver |",
               "|---|---:|---:|---:|---:|---:|:---:|---|---|"]
     for s in r.ranking:
-        params = ", ".join(f"{n.split('.', 1)[1]} {v:+.4g} ± {s['params_se'][n]:.2g}" for n, v in s["params"].items())
+        bound = s.get("at_bound", [])
+        params = ", ".join(f"{n.split('.', 1)[1]} {v:+.4g} " + ("at its bound: not determined" if n in bound else
+                                                                f"± {s['params_se'][n]:.2g}") for n, v in s["params"].items())
         if len(params) > 160:
             params = params[:157] + "..."
-        lines.append(f"| {s['effect']} | {s['delta_ll']:.1f} | {s['delta_bic']:.1f} | {s['p_value']:.2g} | "
+        p = "n/a (no unknowns)" if not np.isfinite(s["p_value"]) else f"{s['p_value']:.2g}"
+        lines.append(f"| {s['effect']} | {s['delta_ll']:.1f} | {s['delta_bic']:.1f} | {p} | "
                      f"{s['gap_after']:.3f} | {100 * s['shrink_fraction']:.0f}% | {'yes' if s['significant'] else ''} | "
                      f"{params} | {s['status']} |")
     if r.base.get("skipped_effects"):
