@@ -23,7 +23,9 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.optimize import least_squares
 
-DENSE_MAX_UNKNOWNS = 3000  # up to here the Jacobian is dense and TRF solves its subproblem exactly (else LSMR)
+# Jacobian entries (80 MB) up to which it is dense and TRF solves its subproblem exactly; above, sparse with
+# LSMR, inexact (on a 4-transect survey it stopped at 1e-5 relative above the optimum)
+DENSE_MAX_ENTRIES = 10_000_000
 
 
 class LeastSquaresSolver:
@@ -75,49 +77,56 @@ class LeastSquaresSolver:
         return J.toarray() if dense else sp.csr_matrix(J)
 
     def _reduction(self, x0, lbx, ubx, lbg, ubg, p):
-        """The unknowns searched, y = x[free], and x(y) = t + T y: (T, t, free). The affine
-        constraints are read off at x0 (any point gives the same)."""
-        n = x0.size
+        """The unknowns searched, y = x[free], and x(y): x[free] = y, x[eliminated] = t + M y, the
+        others held at t: (free, eliminated, M, t). The affine constraints are read off at x0
+        (any point gives the same)."""
         fixed = lbx == ubx
         t = np.where(fixed, lbx, 0.0)
-        eliminated = np.zeros(0, dtype=int)
-        M = np.zeros((0, 0))
+        eliminated, M = np.zeros(0, dtype=int), None
+        loose = np.flatnonzero(~fixed)
+        free = loose
         if self.constraints == "eliminate" and lbg.size:
             if np.any(lbg != ubg):
                 raise ValueError("SolverOptions.constraints: 'eliminate' needs equality constraints; rows "
                                  f"{np.flatnonzero(lbg != ubg).tolist()} have lbg < ubg (use 'penalty')")
-            g0, A = (np.asarray(v) for v in self._g.call([x0, p]))
-            A = np.asarray(ca.DM(A).full())
-            rhs = lbg - (g0.ravel() - A @ x0) - A[:, fixed] @ t[fixed]
-            loose = np.flatnonzero(~fixed)
+            g0, A = self._g.call([x0, p])
+            g0, A = np.asarray(g0).ravel(), np.asarray(ca.DM(A).full())
+            rhs = lbg - (g0 - A @ x0) - A[:, fixed] @ t[fixed]
             _, R, piv = sla.qr(A[:, loose], mode="economic", pivoting=True)
             diag = np.abs(np.diag(R))
             rank = int(np.sum(diag > max(A.shape) * np.finfo(float).eps * (diag[0] if diag.size else 0.0)))
-            eliminated = loose[piv[:rank]]
+            eliminated = np.sort(loose[piv[:rank]])
             free = np.setdiff1d(loose, eliminated)
             pinv = np.linalg.pinv(A[:, eliminated])
             M = -pinv @ A[:, free]
             M[np.abs(M) < 1e-14 * max(1.0, np.max(np.abs(M), initial=0.0))] = 0.0
             t[eliminated] = pinv @ rhs
-        else:
-            free = np.flatnonzero(~fixed)
-        T = sp.lil_matrix((n, free.size))
-        T[free, np.arange(free.size)] = 1.0
-        if eliminated.size:
-            T[eliminated, :] = M
-        return sp.csr_matrix(T), t, free
+        return free, eliminated, M, t
 
     def __call__(self, x0, lbx, ubx, lbg, ubg, p, **_warm):
         x0, lbx, ubx = (np.asarray(v, dtype=float).ravel() for v in (x0, lbx, ubx))
         lbg, ubg = np.asarray(lbg, dtype=float).ravel(), np.asarray(ubg, dtype=float).ravel()
         p = np.asarray(p, dtype=float).ravel()
-        T, t, free = self._reduction(x0, lbx, ubx, lbg, ubg, p)
-        dense = free.size <= DENSE_MAX_UNKNOWNS or self.method == "lm"
+        free, elim, M, t = self._reduction(x0, lbx, ubx, lbg, ubg, p)
+        n_rows = self._e.size1_out(0) + lbg.size
+        dense = self.method == "lm" or n_rows * free.size <= DENSE_MAX_ENTRIES
+        M_sparse = sp.csr_matrix(M) if M is not None else None
         penalty = self.constraints == "penalty" and lbg.size > 0
         root = np.sqrt(self.penalty_weight)
 
         def x_of(y):
-            return t + T @ y
+            x = t.copy()
+            x[free] = y
+            if elim.size:
+                x[elim] += M @ y
+            return x
+
+        def reduce(J):
+            """dx/dy applied on the right: J[:, free] + J[:, eliminated] M."""
+            if dense:
+                return J[:, free] + J[:, elim] @ M if elim.size else J[:, free]
+            J = J.tocsc()
+            return (J[:, free] + J[:, elim] @ M_sparse if elim.size else J[:, free]).tocsr()
 
         def fun(y):
             x = x_of(y)
@@ -129,13 +138,13 @@ class LeastSquaresSolver:
 
         def jac(y):
             x = x_of(y)
-            J = self._jacobian(x, p, dense) @ (T.toarray() if dense else T)
+            J = reduce(self._jacobian(x, p, dense))
             if not penalty:
                 return J
             g, A = self._g.call([x, p])
             g = np.asarray(g).ravel()
             A = np.asarray(ca.DM(A).full()) * (root * ((g < lbg) | (g > ubg)))[:, None]  # active rows only
-            return np.vstack([J, A @ T.toarray()]) if dense else sp.vstack([J, sp.csr_matrix(A) @ T]).tocsr()
+            return np.vstack([J, A[:, free]]) if dense else sp.vstack([J, sp.csr_matrix(A[:, free])]).tocsr()
 
         y0 = x0[free]
         kw = dict(method=self.method, ftol=self.tol, xtol=self.tol, gtol=self.tol, max_nfev=self.max_iter)

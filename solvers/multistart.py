@@ -38,12 +38,12 @@ class SolverOptions:
     ----------
     method : str
         The solver (:data:`~adcpdyn.solvers.nlp_methods.METHODS`): ``ipopt``; the CasADi
-        plugins ``sqpmethod``, ``feasiblesqpmethod``, ``qrsqp``, ``blocksqp``, ``fatrop``,
+        plugins ``sqpmethod``, ``feasiblesqpmethod``, ``blocksqp``, ``fatrop``,
         ``uno``, ``alpaqa``; or scipy's ``least_squares-trf`` / ``least_squares-lm`` on the
         residuals, with the constraints handled as ``constraints`` says. A plugin missing
         from the installed CasADi is refused here.
     qpsol : str
-        QP solver of ``sqpmethod``, ``feasiblesqpmethod`` and ``qrsqp`` (one of
+        QP solver of ``sqpmethod`` and ``feasiblesqpmethod`` (one of
         :data:`~adcpdyn.solvers.nlp_methods.QPSOLS`).
     max_iter : int
     tol : float

@@ -38,8 +38,6 @@ METHODS = {m.name: m for m in (
            "line-search SQP, one QP per iteration"),
     Method("feasiblesqpmethod", "casadi", ("gauss-newton", "exact", "limited-memory"), "gauss-newton", True,
            "trust-region SQP keeping its iterates feasible"),
-    Method("qrsqp", "casadi", ("exact", "limited-memory"), "exact", True,
-           "textbook line-search SQP (no Hessian function option)"),
     Method("blocksqp", "casadi", ("limited-memory",), "quasi-newton", False,
            "filter SQP with quasi-Newton updates (damped BFGS), qpOASES"),
     Method("fatrop", "casadi", ("exact",), "exact", False,
@@ -58,6 +56,8 @@ METHODS = {m.name: m for m in (
 NOT_OFFERED = {
     "bonmin": "a mixed-integer front end: with no integer unknowns it solves the NLP with IPOPT",
     "scpgen": "lifted-Newton SQP: takes an MX graph with the residual vector as its objective, another problem form",
+    "qrsqp": ("an older textbook SQP without a Hessian-function option (no Gauss-Newton); with its exact Hessian "
+              "one of four pool_m0 starts never returned (NaN objective in its line search)"),
     "knitro": "commercial (licensed library)",
     "snopt": "commercial (licensed library)",
     "worhp": "licensed library",
@@ -105,16 +105,15 @@ def casadi_options(options, hessian: str) -> dict:
     opts = {"expand": options.expand, "print_time": False}
     if options.jit:
         opts.update(JIT_OPTIONS)
-    if m in ("sqpmethod", "feasiblesqpmethod", "qrsqp"):
+    if m in ("sqpmethod", "feasiblesqpmethod"):
         opts.update({"qpsol": options.qpsol, "qpsol_options": _quiet_qp(options.qpsol, verbose), "max_iter": it,
-                     "tol_pr": tol, "tol_du": tol, "print_header": verbose, "print_iteration": verbose})
-        if m != "qrsqp":
-            opts["print_status"] = verbose
+                     "tol_pr": tol, "tol_du": tol, "print_header": verbose, "print_iteration": verbose,
+                     "print_status": verbose})
         if m == "feasiblesqpmethod":
             opts.update({"optim_tol": tol, "feas_tol": tol})
         if hessian == "limited-memory":
             opts["hessian_approximation"] = "limited-memory"
-        elif hessian == "exact" and m != "qrsqp":  # the exact Lagrangian Hessian need not be convex
+        elif hessian == "exact":  # the exact Lagrangian Hessian need not be convex
             opts["convexify_strategy"] = "eigen-clip"
     elif m == "blocksqp":
         # schur=False: qpOASES' Schur-complement mode needs an inertia-revealing sparse solver (ma27)
