@@ -202,6 +202,10 @@ def figure_solvers(res: dict, path: Path) -> None:
         for bar, good in zip(bars, ok):
             if not good:
                 bar.set_hatch("//")
+        for yi, n in zip(y, solvers):
+            if "error" in case["rows"].get(n, {}):
+                bx.text(1.05, yi + 0.4 * k - 0.2, "not measured (time limit or crash)", va="center", fontsize=7,
+                        color=f"C{k}")
     bx.axvline(1.0, color="k", lw=0.8)
     bx.set_xscale("log")
     bx.set_yticks(y, solvers, fontsize=8)
