@@ -1,4 +1,5 @@
-"""The NLP solvers the multistart driver can use, and each one's options from :class:`SolverOptions`.
+"""The NLP solvers the multistart driver can use, their settings (:class:`SolverOptions`) and
+each one's options from them.
 
 CasADi ships several solvers that fit a bound- and equality-constrained least-squares NLP;
 scipy's ``least_squares`` solves the same residuals with the constraints eliminated or
@@ -12,6 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import casadi as ca
+
+HESSIANS = ("auto", "gauss-newton", "exact", "limited-memory")
+IPOPT_ONLY = {"warm_start": False}  # fields that mean something to IPOPT alone, with their inert values
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,134 @@ def qp_availability(name: str) -> tuple[bool, str]:
     if ca.has_conic(name):
         return True, "loads"
     return False, f"not in this CasADi build (casadi.has_conic({name!r}) is False)"
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Which NLP solver, and its settings.
+
+    Parameters
+    ----------
+    method : str
+        The solver (:data:`~adcpdyn.solvers.nlp_methods.METHODS`): ``ipopt``; the CasADi
+        plugins ``sqpmethod``, ``feasiblesqpmethod``, ``blocksqp``, ``fatrop``,
+        ``uno``, ``alpaqa``; or scipy's ``least_squares-trf`` / ``least_squares-lm`` on the
+        residuals, with the constraints handled as ``constraints`` says. A plugin missing
+        from the installed CasADi is refused here.
+    qpsol : str
+        QP solver of ``sqpmethod`` and ``feasiblesqpmethod`` (one of
+        :data:`~adcpdyn.solvers.nlp_methods.QPSOLS`).
+    max_iter : int
+    tol : float
+        Convergence tolerance, given to each solver as its own: IPOPT's ``tol`` (acceptable
+        level: 1e3 tol, five iterations in a row), the SQP methods' ``tol_pr`` and
+        ``tol_du`` (and ``feasiblesqpmethod``'s ``optim_tol``, ``feas_tol``), blockSQP's
+        ``opttol`` and ``nlinfeastol``, fatrop's ``tol``, Uno's ``tolerance``, alpaqa's ALM
+        ``tolerance`` and ``dual_tolerance``, least_squares' ``ftol``, ``xtol``, ``gtol``.
+    hessian : str
+        ``auto`` (IPOPT: exact for tiny least-squares problems; Gauss-Newton above
+        ``multistart.AUTO_GN_SIZE`` residuals x unknowns, where each iteration costs a fraction of
+        an exact one: 32 starts on pool_m0 in 2.7 s instead of 4.6 s, estimates equal to
+        1e-6 standard errors; the SQP methods with a QP solver: Gauss-Newton, convex by
+        construction; the others: their own, see ``METHODS``),
+        ``gauss-newton`` (J^T J of the weighted residuals), ``exact`` or
+        ``limited-memory`` (quasi-Newton), where the method takes it.
+    linear_solver : str
+        IPOPT linear solver available in this CasADi build (``mumps`` ships with it).
+    scaling : bool
+        IPOPT's gradient-based NLP scaling.
+    expand : bool
+        Expand MX graphs to SX before solving (faster for small and medium problems).
+    warm_start : bool
+        IPOPT multistart: starts after the first begin from their own x0 but with the first
+        start's multipliers and a small barrier parameter (IPOPT warm start).
+    jit : bool
+        Compile the NLP's functions with the system C compiler (CasADi ``jit``; the
+        C source and objects are written in the working folder).
+    print_level : int
+        0: the solver prints nothing (what CasADi plugins print unasked is dropped).
+    mu_init : float
+        IPOPT's initial barrier parameter (its default 0.1; about 1e-5 for warm starts).
+    constraints : str
+        ``least_squares-*``: ``eliminate`` (affine equality constraints solved for some of
+        the unknowns, whose bounds are then not enforced) or ``penalty`` (a quadratic
+        penalty of weight ``penalty_weight`` on the violation): :mod:`.least_squares`.
+    penalty_weight : float
+    """
+
+    method: str = "ipopt"
+    qpsol: str = "qrqp"
+    max_iter: int = 500
+    tol: float = 1e-7
+    hessian: str = "auto"
+    linear_solver: str = "mumps"
+    scaling: bool = True
+    expand: bool = True
+    warm_start: bool = False
+    jit: bool = False
+    print_level: int = 0
+    mu_init: float = 0.1  # IPOPT's initial barrier; small when the start is already good (warm starts)
+    constraints: str = "eliminate"
+    penalty_weight: float = 1e10  # scaled problem of pool_m0: violation ~6e-8, objective -1e-7 relative
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"SolverOptions.method: expected one of {list(METHODS)}, got {self.method!r}")
+        ok, why = availability(self.method)
+        if not ok:
+            raise ValueError(f"SolverOptions.method: {self.method!r} is {why}")
+        if self.hessian not in HESSIANS:
+            raise ValueError(f"SolverOptions.hessian: expected one of {list(HESSIANS)}, got {self.hessian!r}")
+        spec = METHODS[self.method]
+        if self.hessian != "auto" and self.hessian not in spec.hessians:
+            raise ValueError(f"SolverOptions.hessian: method {self.method!r} takes one of "
+                             f"{['auto', *spec.hessians]}, got {self.hessian!r}")
+        if self.qpsol not in QPSOLS:
+            raise ValueError(f"SolverOptions.qpsol: expected one of {list(QPSOLS)}, got {self.qpsol!r}")
+        if spec.qpsol:
+            ok, why = qp_availability(self.qpsol)
+            if not ok:
+                raise ValueError(f"SolverOptions.qpsol: {self.qpsol!r} is {why}")
+        if self.constraints not in CONSTRAINT_HANDLING:
+            raise ValueError(f"SolverOptions.constraints: expected one of {list(CONSTRAINT_HANDLING)}, "
+                             f"got {self.constraints!r}")
+        if not float(self.penalty_weight) > 0:
+            raise ValueError(f"SolverOptions.penalty_weight: expected > 0, got {self.penalty_weight!r}")
+        if not float(self.tol) > 0:
+            raise ValueError(f"SolverOptions.tol: expected > 0, got {self.tol!r}")
+        if int(self.max_iter) < 1:
+            raise ValueError(f"SolverOptions.max_iter: expected >= 1, got {self.max_iter!r}")
+        if self.method != "ipopt":
+            for name, inert in IPOPT_ONLY.items():
+                if getattr(self, name) != inert:
+                    raise ValueError(f"SolverOptions.{name}: IPOPT's alone; expected {inert!r} with method "
+                                     f"{self.method!r}, got {getattr(self, name)!r}")
+        if spec.family == "scipy" and self.jit:
+            raise ValueError(f"SolverOptions.jit: CasADi code generation; expected False with method {self.method!r}")
+
+    def ipopt(self) -> dict:
+        opts = {
+            "expand": self.expand,
+            "print_time": False,
+            "ipopt.print_level": self.print_level,
+            "ipopt.sb": "yes",
+            "ipopt.max_iter": self.max_iter,
+            "ipopt.tol": self.tol,
+            "ipopt.acceptable_tol": 1e3 * self.tol,
+            # at the optimum of a large least-squares objective the line search stalls on round-off
+            # (steps of 1e-9, f unchanged to 1e-13): five acceptable iterations in a row end it
+            "ipopt.acceptable_iter": 5,
+            "ipopt.hessian_approximation": "limited-memory" if self.hessian == "limited-memory" else "exact",
+            "ipopt.linear_solver": self.linear_solver,
+            "ipopt.nlp_scaling_method": "gradient-based" if self.scaling else "none",
+            "ipopt.mu_init": self.mu_init,
+        }
+        if self.warm_start:
+            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+        if self.jit:  # CasADi writes the C source and the compiled objects in the working folder
+            opts.update(JIT_OPTIONS)
+        return opts
 
 
 def _quiet_qp(qpsol: str, verbose: bool) -> dict:
