@@ -232,6 +232,7 @@ def _prepare(path, say: bool = True):
 
 from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
 from .estimators.correct_case import correct_case as _correct  # noqa: E402
+from .solvers.nlp_methods import METHODS  # noqa: E402
 
 
 def _load_calibration(path):
@@ -375,12 +376,15 @@ def _calibration_config(args, formulation=None):
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
                          f"{args.moving_bed} (drop it, or use --moving-bed section)")
+    from .solvers.multistart import SolverOptions
+
     declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
     return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
                              jacobian=args.jacobian, attitude=args.attitude, moving_bed=args.moving_bed,
                              moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
-                             standard_errors=args.standard_errors, magnetic_declination_rad=declination)
+                             standard_errors=args.standard_errors, magnetic_declination_rad=declination,
+                             solver=SolverOptions(method=args.solver))
 
 
 def _print_calibration(result, title: str) -> None:
@@ -656,7 +660,7 @@ def cmd_bench(args) -> int:
     from .benchmarks.suites import run
 
     check_output_folder(args.out)
-    run(args.suite, args.quick, Path(args.out))
+    run(args.suite, args.quick, Path(args.out), readme=Path(args.readme) if args.readme else None)
     return 0
 
 
@@ -827,6 +831,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="hac (Newey-West sandwich, coloured residuals) or white")
         s.add_argument("--declination-deg", type=_angle_deg,
                        help="magnetic declination at the site (east positive), when the cases carry no position and date")
+        s.add_argument("--solver", default="ipopt", choices=list(METHODS),
+                       help="NLP solver of the multistart (ipopt; CasADi's SQP, interior-point and augmented-Lagrangian "
+                            "plugins; scipy least_squares on the residuals): `adcpdyn bench solvers` compares them")
 
     s = command("calibrate", "estimate attitude model, lever arms and installation angles (one or many cases)",
                 cmd_calibrate)
@@ -882,6 +889,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="which benchmark")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results", help="folder of the results")
+    s.add_argument("--readme", metavar="FILE", help="solvers suite: put its tables between FILE's solver-table markers "
+                                                    "(README.md)")
 
     s = command("demo", "the main job on the built-in default case", cmd_demo)
     s.add_argument("--scenario", nargs="+", default=list(DEFAULT_CASES), help="measurement runs to correct")

@@ -5,6 +5,9 @@ from __future__ import annotations
 import json
 import os
 import platform
+import signal
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +54,24 @@ def timed_calibration(case, fit=None, **config):
     return result, setup, time.perf_counter() - tic
 
 
+def json_from_child(code: str, time_limit_s: float, cwd=None, env: dict | None = None) -> tuple[dict | None, str]:
+    """Run ``python -c code`` in its own session; (the JSON of its last stdout line, "") or (None,
+    why not). Past ``time_limit_s`` the child's whole process group (a compiler too) is killed."""
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=cwd, start_new_session=True, env=None if env is None else {**os.environ, **env})
+    try:
+        out, err = proc.communicate(timeout=time_limit_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        return None, f"did not finish within {time_limit_s:.0f} s"
+    lines = out.strip().splitlines()
+    if proc.returncode != 0 or not lines:
+        last = [ln for ln in err.strip().splitlines() if ln.strip()]
+        return None, f"process exited with status {proc.returncode}" + (f": {last[-1][:160]}" if last else "")
+    return json.loads(lines[-1]), ""
+
+
 def write_json(res: dict, path: Path) -> None:
     """The suite's figures as JSON, written atomically."""
     from ..cases.atomic import atomic_path
@@ -59,6 +80,33 @@ def write_json(res: dict, path: Path) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "w") as fh:
             json.dump(jsonable(res), fh, indent=2)
+
+
+def write_text(text: str, path: Path) -> None:
+    """A text file (a markdown table), written atomically."""
+    from ..cases.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text)
+
+
+def marked_span(path: Path, begin: str, end: str) -> tuple[list, int, int]:
+    """A text file's lines and the indices of its ``begin`` and ``end`` marker lines (each once, in order)."""
+    path = Path(path)
+    lines = path.read_text().splitlines(keepends=True)
+    found = [i for i, ln in enumerate(lines) if ln.strip() == begin], [i for i, ln in enumerate(lines) if ln.strip() == end]
+    if len(found[0]) != 1 or len(found[1]) != 1 or found[0][0] > found[1][0]:
+        raise ValueError(f"--readme: {path} needs the line {begin!r} once, then {end!r} once "
+                         f"(found {len(found[0])} and {len(found[1])})")
+    return lines, found[0][0], found[1][0]
+
+
+def replace_marked_block(path: Path, begin: str, end: str, text: str) -> None:
+    """Replace what lies between the lines ``begin`` and ``end`` of a text file (a README) with
+    ``text``, atomically; the markers stay."""
+    lines, i, j = marked_span(path, begin, end)
+    block = text if text.endswith("\n") else text + "\n"
+    write_text("".join(lines[:i + 1]) + block + "".join(lines[j:]), Path(path))
 
 
 def save_figure(fig, path: Path) -> None:

@@ -1,28 +1,31 @@
-"""``adcpdyn bench solvers``: IPOPT settings and graph forms on one calibration, same run.
+"""``adcpdyn bench solvers``: IPOPT settings and graph forms on one calibration, then the other
+NLP solvers the driver offers (:mod:`.solver_comparison`), same run.
 
-Every variant solves the same pool_m0 case from the same starts with the same
+Every IPOPT variant solves the same pool_m0 case from the same starts with the same
 attitude pre-fit; rows give the set-up time (building the NLP and the solver), the
 multistart's wall time, the objective reached (relative to the default's), the share of
 starts at the best and the mean iterations. Times are ratios to the default measured
-in the same run.
+in the same run. The tables are also written as markdown (``solvers.md``), which
+``--readme`` puts between the README's solver-table markers.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import shutil
-import signal
-import subprocess
-import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
 
-from .common import Target, machine, print_targets, save_figure, timed_calibration
+from .common import Target, json_from_child, machine, print_targets, save_figure, timed_calibration
+from .solver_comparison import CASES, bench_solver_comparison, comparison_lines
 from ..solvers.multistart import SolverOptions
+
+README_BEGIN = "<!-- solver-table: begin (written by adcpdyn bench solvers --readme README.md) -->"
+README_END = "<!-- solver-table: end -->"
 
 
 def variants(linear: dict, compiler: bool) -> dict:
@@ -69,19 +72,14 @@ def _row_in_child(starts, seed, opts: SolverOptions, time_limit_s: float) -> dic
     (the child's whole process group, compiler included, is then killed)."""
     code = f"from adcpdyn.benchmarks.solvers import _child; _child({starts}, {seed}, {json.dumps(json.dumps(dataclasses.asdict(opts)))})"
     with tempfile.TemporaryDirectory(prefix="adcpdyn_jit_") as cwd:  # the C source and objects land here
-        proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                cwd=cwd, start_new_session=True)
-        try:
-            out, _ = proc.communicate(timeout=time_limit_s)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
-            return None
-    return json.loads(out.strip().splitlines()[-1]) if proc.returncode == 0 and out.strip() else None
+        return json_from_child(code, time_limit_s, cwd=cwd)[0]
 
 
-def bench_solvers(starts: int, seed: int = 1, jit: bool = True, jit_time_limit_s: float = 300.0) -> dict:
-    """Each variant on pool_m0 (seed ``seed``), then the 32-start multistart target."""
+def bench_solvers(starts: int, seed: int = 1, jit: bool = True, jit_time_limit_s: float = 300.0,
+                  compare_starts: int = 8, compare_slowdown: float = 50.0, compare_cases=None) -> dict:
+    """Each IPOPT variant on pool_m0 (seed ``seed``), the 32-start multistart target, then every
+    offered solver on pool_m0 and a 4-transect survey (``compare_starts`` starts each;
+    :func:`~adcpdyn.benchmarks.solver_comparison.bench_solver_comparison`)."""
     from ..cases.scenario import get_scenario
     from ..estimators.attitude_fit import fit_attitude
     from ..cases.simulation import simulate
@@ -119,23 +117,55 @@ def bench_solvers(starts: int, seed: int = 1, jit: bool = True, jit_time_limit_s
                                             solver=SolverOptions(**rows[name]["options"]))
         ms32[name] = {"setup_s": setup, "solve_s": solve, "wall_s": setup + solve,
                       "fraction_at_best": r.multistart.fraction_at_best, "objective": r.objective}
-    return {"suite": "solvers", "machine": machine(), "case": "pool_m0", "seed": seed, "starts": starts,
-            "linear_solvers": linear, "notes": notes, "rows": rows, "fastest": fastest, "multistart_32": ms32}
+    comparison = bench_solver_comparison(compare_starts, seed=seed, slowdown=compare_slowdown,
+                                         cases=compare_cases or tuple(CASES))
+    return {"suite": "solvers", "machine": machine(), "date": time.strftime("%Y-%m-%d"), "case": "pool_m0", "seed": seed,
+            "starts": starts,
+            "linear_solvers": linear, "notes": notes, "rows": rows, "fastest": fastest, "multistart_32": ms32,
+            "comparison": comparison}
+
+
+def ipopt_lines(res: dict) -> list:
+    """The IPOPT-settings table and its notes as text lines."""
+    lines = [f"solvers benchmark: pool_m0 seed {res['seed']}, {res['starts']} starts, same pre-fit and starts; "
+             "times from one run on a shared machine (noisy: compare the ratios)",
+             f"{'variant':<38}{'setup s':>8}{'solve s':>8}{'ratio':>7}{'rel obj':>10}{'at best':>8}{'iter':>7}{'ok':>4}"]
+    for name, r in res["rows"].items():
+        lines.append(f"{name:<38}{r['setup_s']:>8.2f}{r['solve_s']:>8.2f}{r['solve_time_ratio']:>7.2f}"
+                     f"{r['objective_rel_to_default']:>10.1e}{r['fraction_at_best']:>8.2f}{r['iterations_mean']:>7.1f}"
+                     f"{'yes' if r['success'] else 'no':>4}")
+    lines += [f"  note: {note}" for note in res["notes"]]
+    lines.append("\n32-start multistart on pool_m0 (fresh problem: set-up includes the attitude pre-fit)")
+    lines += [f"  {name:<38} set-up {m['setup_s']:.2f} s, solve {m['solve_s']:.2f} s, at best {m['fraction_at_best']:.2f}"
+              for name, m in res["multistart_32"].items()]
+    return lines
+
+
+def markdown_solvers(res: dict, command: str) -> str:
+    """Both tables as markdown, with the command, date and machine that produced them."""
+    m = res["machine"]
+    c = res["comparison"]
+    out = [f"Written by `{command}` on {res.get('date', '?')} ({m['cpus']} CPUs shared with other work, "
+           f"CasADi {m['casadi']}, Python {m['python']}); times are one run's: compare the ratios.", "",
+           "IPOPT settings:", "", "```", *ipopt_lines(res), "",
+           *[f"[{'met' if t['met'] else 'NOT met'}] {t['target']}: {t['value']:.4g}" for t in res.get("targets", [])],
+           "```", "",
+           f"The NLP solvers of the multistart driver (`SolverOptions(method=...)`), each in a process of its own, one "
+           f"start at a time on one BLAS thread, stopped after twice IPOPT's process time plus {c['slowdown']:g}x its "
+           f"solve time; rel obj against the best "
+           f"objective of any solver whose solution meets the constraints and bounds to {c['feasible']:g}; at best: "
+           f"share of starts within {c['objective_rtol']:g} of it; g viol in metres (lever-arm constraints), box viol "
+           "in each unknown's unit; iter: the solver's own count (least_squares: Jacobian evaluations; n/a: not reported); "
+           "t/IPOPT: solve time over IPOPT's; status as each solver words it (fatrop: its return code, 0 = converged).",
+           ""]
+    out += comparison_lines(c, markdown=True)
+    return "\n".join(out) + "\n"
 
 
 def print_solvers(res: dict) -> None:
-    print(f"solvers benchmark: pool_m0 seed {res['seed']}, {res['starts']} starts, same pre-fit and starts; "
-          "times from one run on a shared machine (noisy: compare the ratios)")
-    print(f"{'variant':<38}{'setup s':>8}{'solve s':>8}{'ratio':>7}{'rel obj':>10}{'at best':>8}{'iter':>7}{'ok':>4}")
-    for name, r in res["rows"].items():
-        print(f"{name:<38}{r['setup_s']:>8.2f}{r['solve_s']:>8.2f}{r['solve_time_ratio']:>7.2f}"
-              f"{r['objective_rel_to_default']:>10.1e}{r['fraction_at_best']:>8.2f}{r['iterations_mean']:>7.1f}"
-              f"{'yes' if r['success'] else 'no':>4}")
-    for note in res["notes"]:
-        print(f"  note: {note}")
-    print("\n32-start multistart on pool_m0 (fresh problem: set-up includes the attitude pre-fit)")
-    for name, m in res["multistart_32"].items():
-        print(f"  {name:<38} set-up {m['setup_s']:.2f} s, solve {m['solve_s']:.2f} s, at best {m['fraction_at_best']:.2f}")
+    print("\n".join(ipopt_lines(res)))
+    print("\nNLP solvers of the multistart driver (each in its own process, one start at a time)")
+    print("\n".join(comparison_lines(res["comparison"])))
     targets = []
     for name, m in res["multistart_32"].items():
         targets.append(Target(f"32-start multistart on pool_m0 < 2 s, solve only [{name}]", m["solve_s"], m["solve_s"] < 2.0))
@@ -152,7 +182,9 @@ def figure_solvers(res: dict, path: Path) -> None:
     names = list(res["rows"])
     setup = [res["rows"][n]["setup_s"] for n in names]
     solve = [res["rows"][n]["solve_s"] for n in names]
-    fig, ax = plt.subplots(figsize=(9, 0.45 * len(names) + 1.5))
+    comp = res["comparison"]["cases"]
+    solvers = list(dict.fromkeys(k for case in comp.values() for k in case["rows"]))
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(15, 0.3 * max(len(names), len(solvers)) + 2.0))
     y = np.arange(len(names))
     ax.barh(y, setup, color="C7", label="set-up (NLP + solver build)")
     ax.barh(y, solve, left=setup, color="C0", label=f"{res['starts']}-start multistart")
@@ -161,5 +193,25 @@ def figure_solvers(res: dict, path: Path) -> None:
     ax.set_xlabel("seconds (one run, shared 2-core machine)")
     ax.legend(fontsize=8)
     ax.set_title(f"IPOPT variants on pool_m0 seed {res['seed']}")
+    y = np.arange(len(solvers))
+    for k, (key, case) in enumerate(comp.items()):
+        ratio = [case["rows"].get(n, {}).get("solve_ratio_to_ipopt", np.nan) for n in solvers]
+        ok = [bool(case["rows"].get(n, {}).get("success")) and case["rows"][n].get("fraction_at_best", 0) > 0
+              for n in solvers]
+        bars = bx.barh(y + 0.4 * k - 0.2, ratio, height=0.4, color=f"C{k}", label=key)
+        for bar, good in zip(bars, ok):
+            if not good:
+                bar.set_hatch("//")
+        for yi, n in zip(y, solvers):
+            if "error" in case["rows"].get(n, {}):
+                bx.text(1.05, yi + 0.4 * k - 0.2, "not measured (time limit or crash)", va="center", fontsize=7,
+                        color=f"C{k}")
+    bx.axvline(1.0, color="k", lw=0.8)
+    bx.set_xscale("log")
+    bx.set_yticks(y, solvers, fontsize=8)
+    bx.invert_yaxis()
+    bx.set_xlabel("solve time / IPOPT's (hatched: failed, or no start at the best)")
+    bx.legend(fontsize=8)
+    bx.set_title(f"NLP solvers, {res['comparison']['starts']} starts")
     fig.tight_layout()
     save_figure(fig, path)

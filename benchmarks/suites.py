@@ -14,7 +14,7 @@ import numpy as np
 
 from ..models.rotations import course_difference_rad
 from .common import machine as _machine
-from .common import save_figure, write_json
+from .common import marked_span, replace_marked_block, save_figure, write_json, write_text
 
 SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis", "compliance")
 
@@ -339,7 +339,9 @@ def _suite(suite: str, quick: bool):
     if suite == "solvers":
         from .solvers import bench_solvers, figure_solvers, print_solvers
 
-        return bench_solvers(starts=8, jit=not quick), print_solvers, figure_solvers
+        # quick: the single run only, 2 starts (the survey's rows take about half an hour)
+        return bench_solvers(starts=8, jit=not quick, compare_starts=2 if quick else 8, compare_slowdown=30.0 if quick else 50.0,
+                             compare_cases=("single run",) if quick else None), print_solvers, figure_solvers
     if suite == "compliance":
         from .compliance import bench_compliance, figure_compliance, print_compliance
 
@@ -360,11 +362,21 @@ def _suite(suite: str, quick: bool):
     return bench_scale(sizes, time_limit_s=120.0 if quick else 900.0), print_scale, figure_scale
 
 
-def run(suite: str, quick: bool, out_dir: Path) -> dict:
+def run(suite: str, quick: bool, out_dir: Path, readme: Path | None = None) -> dict:
     """Run one suite; print its table and targets; write ``<suite>.json`` and ``<suite>.png``
-    (``<suite>_quick.*`` in quick mode, so that a quick run never replaces a full one)."""
+    (``<suite>_quick.*`` in quick mode, so that a quick run never replaces a full one). The
+    solvers suite also writes ``<suite>.md`` and, given ``readme``, puts it between that file's
+    solver-table markers."""
     if suite not in SUITES:
         raise ValueError(f"suite: expected one of {list(SUITES)}, got {suite!r}")
+    if readme is not None and suite != "solvers":
+        raise ValueError(f"--readme: only the solvers suite writes a README table, not {suite!r}")
+    if readme is not None:
+        from .solvers import README_BEGIN, README_END
+
+        if not Path(readme).is_file():
+            raise ValueError(f"--readme: {readme} is not a file")
+        marked_span(Path(readme), README_BEGIN, README_END)  # before the run, not after it
     tic = time.perf_counter()
     res, show, figure = _suite(suite, quick)
     res["quick"] = bool(quick)
@@ -376,4 +388,14 @@ def run(suite: str, quick: bool, out_dir: Path) -> dict:
     write_json(res, out_dir / f"{name}.json")
     figure(res, out_dir / f"{name}.png")
     print(f"\nwrote {out_dir / (name + '.json')}, {out_dir / (name + '.png')} ({res['suite_wall_s']:.0f} s)")
+    if suite == "solvers":
+        from .solvers import README_BEGIN, README_END, markdown_solvers
+
+        command = f"adcpdyn bench solvers{' --quick' if quick else ''} --out {out_dir}" + (f" --readme {readme}" if readme else "")
+        text = markdown_solvers(res, command)
+        write_text(text, out_dir / f"{name}.md")
+        print(f"wrote {out_dir / (name + '.md')}")
+        if readme is not None:
+            replace_marked_block(Path(readme), README_BEGIN, README_END, text)
+            print(f"replaced the solver table in {readme}")
     return res

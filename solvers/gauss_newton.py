@@ -17,9 +17,10 @@ DENSE_GRAM_MAX_UNKNOWNS = 3000  # up to here J^T J is formed dense from the Jaco
 
 
 class GaussNewtonHessian(ca.Callback):
-    """``nlp_hess_l(x, p, lam_f, lam_g) -> sigma * triu(J^T J)`` from an assembled Jacobian."""
+    """``nlp_hess_l(x, p, lam_f, lam_g) -> sigma * triu(J^T J)`` (or the whole J^T J, ``upper=False``,
+    for solvers that take a symmetric Hessian) from an assembled Jacobian."""
 
-    def __init__(self, jacobian, n_g: int, name: str = "nlp_hess_l"):
+    def __init__(self, jacobian, n_g: int, name: str = "nlp_hess_l", upper: bool = True):
         """``jacobian``: a callable (x, p) -> scipy sparse J with attributes ``sparsity`` (its
         structural pattern, scipy) and ``n_z``, ``n_p``; if it has ``gram(x, p)`` (dense J^T J)
         that is used instead of forming J."""
@@ -27,8 +28,9 @@ class GaussNewtonHessian(ca.Callback):
         self._jac = jacobian
         self._n_g = n_g
         self._n_x, self._n_p = jacobian.n_z, jacobian.n_p
+        self._upper = upper
         P = jacobian.sparsity.astype(float)
-        H = sp.triu(P.T @ P).tocoo()
+        H = (sp.triu(P.T @ P) if upper else sp.csr_matrix(P.T @ P)).tocoo()
         self._hess_sp = ca.Sparsity.triplet(self._n_x, self._n_x, H.row.tolist(), H.col.tolist())
         rows, cols = self._hess_sp.get_triplet()
         self._rows, self._cols = np.asarray(rows), np.asarray(cols)
@@ -44,7 +46,7 @@ class GaussNewtonHessian(ca.Callback):
         return ("x", "p", "lam_f", "lam_g")[i]
 
     def get_name_out(self, i):
-        return "triu_hess_gamma_x_x"
+        return "triu_hess_gamma_x_x" if self._upper else "hess_gamma_x_x"
 
     def get_sparsity_in(self, i):
         return (ca.Sparsity.dense(self._n_x, 1), ca.Sparsity.dense(self._n_p, 1), ca.Sparsity.scalar(),

@@ -1,12 +1,18 @@
-"""IPOPT multistart: one solver built per problem shape, many starting points.
+"""Multistart: one NLP solver built per problem shape, many starting points.
 
-The NLP is a CasADi dict ``{'x', 'p', 'f', 'g'}``; the solver is created once and
-called from every start. Local solutions are grouped by objective and position; the
-result says which start reached the best, how many did, and every start's record.
+The NLP is a CasADi dict ``{'x', 'p', 'f', 'g'}``; the solver (IPOPT by default, another
+CasADi nlpsol plugin or scipy's ``least_squares``: :mod:`.nlp_methods`) is created once and
+called from every start. Local solutions are grouped by objective and position; the result
+says which start reached the best, how many did, and every start's record with the solver's
+own status.
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import io
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -15,82 +21,10 @@ import casadi as ca
 import numpy as np
 
 from .gauss_newton import GaussNewtonHessian
+from .least_squares import LeastSquaresSolver
+from .nlp_methods import METHODS, SolverOptions, casadi_options
 
 AUTO_GN_SIZE = 5_000  # nonzeros of the residual Jacobian's bounding box
-HESSIANS = ("auto", "gauss-newton", "exact", "limited-memory")
-
-
-@dataclass(frozen=True)
-class SolverOptions:
-    """IPOPT settings.
-
-    Parameters
-    ----------
-    max_iter : int
-    tol : float
-        IPOPT's convergence tolerance (acceptable level: 1e3 tol, five iterations in a row).
-    hessian : str
-        ``auto`` (exact for tiny least-squares problems; Gauss-Newton above
-        ``AUTO_GN_SIZE`` residuals x unknowns, where each iteration costs a fraction of
-        an exact one: 32 starts on pool_m0 in 2.7 s instead of 4.6 s, estimates equal to
-        1e-6 standard errors),
-        ``gauss-newton`` (J^T J of the weighted residuals), ``exact`` or
-        ``limited-memory`` (quasi-Newton).
-    linear_solver : str
-        IPOPT linear solver available in this CasADi build (``mumps`` ships with it).
-    scaling : bool
-        IPOPT's gradient-based NLP scaling.
-    expand : bool
-        Expand MX graphs to SX before solving (faster for small and medium problems).
-    warm_start : bool
-        Multistart: starts after the first begin from their own x0 but with the first
-        start's multipliers and a small barrier parameter (IPOPT warm start).
-    jit : bool
-        Compile the NLP's functions with the system C compiler (CasADi ``jit``; the
-        C source and objects are written in the working folder).
-    print_level : int
-    mu_init : float
-        IPOPT's initial barrier parameter (its default 0.1; about 1e-5 for warm starts).
-    """
-
-    max_iter: int = 500
-    tol: float = 1e-7
-    hessian: str = "auto"
-    linear_solver: str = "mumps"
-    scaling: bool = True
-    expand: bool = True
-    warm_start: bool = False
-    jit: bool = False
-    print_level: int = 0
-    mu_init: float = 0.1  # IPOPT's initial barrier; small when the start is already good (warm starts)
-
-    def __post_init__(self):
-        if self.hessian not in HESSIANS:
-            raise ValueError(f"SolverOptions.hessian: expected one of {list(HESSIANS)}, got {self.hessian!r}")
-
-    def ipopt(self) -> dict:
-        opts = {
-            "expand": self.expand,
-            "print_time": False,
-            "ipopt.print_level": self.print_level,
-            "ipopt.sb": "yes",
-            "ipopt.max_iter": self.max_iter,
-            "ipopt.tol": self.tol,
-            "ipopt.acceptable_tol": 1e3 * self.tol,
-            # at the optimum of a large least-squares objective the line search stalls on round-off
-            # (steps of 1e-9, f unchanged to 1e-13): five acceptable iterations in a row end it
-            "ipopt.acceptable_iter": 5,
-            "ipopt.hessian_approximation": "limited-memory" if self.hessian == "limited-memory" else "exact",
-            "ipopt.linear_solver": self.linear_solver,
-            "ipopt.nlp_scaling_method": "gradient-based" if self.scaling else "none",
-            "ipopt.mu_init": self.mu_init,
-        }
-        if self.warm_start:
-            opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
-                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
-        if self.jit:  # CasADi writes the C source and the compiled objects in the working folder
-            opts.update({"jit": True, "compiler": "shell", "jit_options": {"flags": ["-O1"], "verbose": False}})
-        return opts
 
 
 @dataclass(frozen=True)
@@ -152,11 +86,46 @@ def expand_problem(nlp: dict, residuals: ca.MX, extra: dict | None = None):
     return sx_nlp, out["residuals"], {k: out[k] for k in extra}
 
 
-def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals=None,
-                 like: ca.Function | None = None) -> ca.Function:
-    """The IPOPT solver Function for an NLP dict.
+def _gauss_newton_hessian(nlp: dict, residuals, upper: bool):
+    """sigma J^T J as the ``hess_lag`` Function (upper triangle for IPOPT, whole for the SQP methods)."""
+    if residuals is None:
+        raise ValueError("residuals: required for hessian='gauss-newton' (f must be 0.5 |residuals|^2)")
+    assembled = hasattr(residuals, "sparsity") and not isinstance(residuals, ca.Function)
+    if assembled:  # assembled per-row Jacobian (scipy): the callback
+        return GaussNewtonHessian(residuals, nlp["g"].shape[0], upper=upper)
+    x, p = nlp["x"], nlp.get("p", ca.MX.sym("p", 0))
+    jac = residuals if isinstance(residuals, ca.Function) else \
+        ca.Function("residual_jacobian", [x, p], [ca.jacobian(residuals, x)])
+    # sigma J^T J as a CasADi graph: evaluated in C, threads run free
+    X, P, lam_f = ca.MX.sym("x", jac.size1_in(0)), ca.MX.sym("p", jac.size1_in(1)), ca.MX.sym("lam_f")
+    J = jac(X, P)
+    H = ca.mtimes(J.T, J)
+    return ca.Function("nlp_hess_l", [X, P, lam_f, ca.MX.sym("lam_g", nlp["g"].shape[0])],
+                       [lam_f * (ca.triu(H) if upper else H)], ["x", "p", "lam_f", "lam_g"],
+                       ["triu_hess_gamma_x_x" if upper else "hess_gamma_x_x"])
 
-    For ``hessian="gauss-newton"`` pass ``residuals``: the vector e with f = 0.5 |e|^2,
+
+def resolved_hessian(options: SolverOptions, residuals=None) -> str:
+    """What ``options.hessian`` means for this method and problem (``auto`` resolved)."""
+    if options.hessian != "auto":
+        return options.hessian
+    rule = METHODS[options.method].auto
+    assembled = residuals is not None and hasattr(residuals, "sparsity") and not isinstance(residuals, ca.Function)
+    if rule == "size":
+        size = residuals.size1_out(0) * residuals.size2_out(0) if isinstance(residuals, ca.Function) else 0
+        return "gauss-newton" if assembled or (residuals is not None and size > AUTO_GN_SIZE) else "exact"
+    if rule == "gauss-newton":
+        return "gauss-newton" if residuals is not None else "exact"
+    return rule
+
+
+def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals=None,
+                 like: ca.Function | None = None, residual_fun: ca.Function | None = None):
+    """The solver of ``options.method`` for an NLP dict: a CasADi nlpsol Function, or for
+    ``least_squares-*`` a :class:`~adcpdyn.solvers.least_squares.LeastSquaresSolver`
+    (called the same way; it needs ``residual_fun``, (x, p) -> e as its first output).
+
+    For the Gauss-Newton Hessian pass ``residuals``: the vector e with f = 0.5 |e|^2,
     the Function (x, p) -> de/dx, or an assembled Jacobian such as
     :class:`~adcpdyn.estimators.row_jacobian.RowJacobian`. The Lagrangian Hessian is then
     sigma J^T J (constraint curvature left out, as in CasADi's ``sysid.py`` example): a
@@ -164,39 +133,71 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
     loop: 32 starts on pool_m0 2.2 s -> 0.9 s), or for an assembled Jacobian the callback
     :class:`~adcpdyn.solvers.gauss_newton.GaussNewtonHessian`.
 
-    ``like``: a solver already built for the same NLP and options; its derivative
+    ``like``: an IPOPT solver already built for the same NLP and options; its derivative
     Functions (gradient, constraint Jacobian, exact Hessian) are reused instead of being
     derived again (CasADi evaluates a Function from several threads, each call with its
     own memory). The Gauss-Newton callback is never shared.
     """
-    opts = options.ipopt()
-    hessian = options.hessian
-    assembled = residuals is not None and hasattr(residuals, "sparsity") and not isinstance(residuals, ca.Function)
-    if hessian == "auto":
-        size = residuals.size1_out(0) * residuals.size2_out(0) if isinstance(residuals, ca.Function) else 0
-        hessian = "gauss-newton" if assembled or (residuals is not None and size > AUTO_GN_SIZE) else "exact"
+    spec = METHODS[options.method]
+    if spec.family == "scipy":
+        if residual_fun is None and residuals is not None and isinstance(residuals, (ca.SX, ca.MX)):
+            x, p = nlp["x"], nlp.get("p", ca.MX.sym("p", 0))
+            residual_fun = ca.Function("residuals", [x, p], [residuals])
+            residuals = ca.Function("residual_jacobian", [x, p], [ca.jacobian(residuals, x)])
+        if residual_fun is None or residuals is None:
+            raise ValueError(f"SolverOptions.method: {options.method!r} solves the residuals; build_solver needs "
+                             "residual_fun ((x, p) -> e) and residuals (their Jacobian)")
+        return LeastSquaresSolver(nlp, residual_fun, residuals, method=options.method.split("-")[1],
+                                  constraints=options.constraints, penalty_weight=options.penalty_weight,
+                                  tol=options.tol, max_iter=options.max_iter)
+    hessian = resolved_hessian(options, residuals)
+    opts = options.ipopt() if options.method == "ipopt" else casadi_options(options, hessian)
     if hessian == "gauss-newton":
-        if residuals is None:
-            raise ValueError("residuals: required for hessian='gauss-newton' (f must be 0.5 |residuals|^2)")
-        x, p = nlp["x"], nlp.get("p", ca.MX.sym("p", 0))
-        jac = residuals if isinstance(residuals, ca.Function) or assembled else \
-            ca.Function("residual_jacobian", [x, p], [ca.jacobian(residuals, x)])
-        if isinstance(jac, ca.Function):  # sigma triu(J^T J) as a CasADi graph: evaluated in C, threads run free
-            X, P, lam_f = ca.MX.sym("x", jac.size1_in(0)), ca.MX.sym("p", jac.size1_in(1)), ca.MX.sym("lam_f")
-            J = jac(X, P)
-            opts["hess_lag"] = ca.Function("nlp_hess_l", [X, P, lam_f, ca.MX.sym("lam_g", nlp["g"].shape[0])],
-                                           [lam_f * ca.triu(ca.mtimes(J.T, J))],
-                                           ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-        else:  # assembled per-row Jacobian (scipy): the callback
-            callback = GaussNewtonHessian(jac, nlp["g"].shape[0])
-            opts["hess_lag"] = callback
-    if like is not None:
+        opts["hess_lag"] = _gauss_newton_hessian(nlp, residuals, upper=options.method == "ipopt")
+    if like is not None and options.method == "ipopt":
         shared = [("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g")] + ([("hess_lag", "nlp_hess_l")] if hessian == "exact" else [])
         opts.update({opt: like.get_function(fn) for opt, fn in shared if like.has_function(fn)})
-    solver = ca.nlpsol(name, "ipopt", nlp, opts)
+    quiet = options.print_level == 0 and options.method != "ipopt"
+    with silenced(quiet):
+        solver = ca.nlpsol(name, options.method, nlp, opts)
+    solver.quiet_stdout = quiet  # some plugins print whatever their options say: the driver drops it
     if "hess_lag" in opts and isinstance(opts["hess_lag"], GaussNewtonHessian):
         solver.gauss_newton_callback = opts["hess_lag"]  # the callback lives as long as its solver, no longer
     return solver
+
+
+class _Discard(io.TextIOBase):
+    def write(self, text):
+        return len(text)
+
+
+@contextlib.contextmanager
+def silenced(quiet: bool):
+    """Drop what is printed while ``quiet``: to Python's stdout (where CasADi's C++ output goes)
+    and to the process's standard output (libraries inside plugins, e.g. blockSQP's qpOASES,
+    call printf)."""
+    if not quiet:
+        yield
+        return
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    saved, sink = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(sink, 1)
+    try:
+        with contextlib.redirect_stdout(_Discard()):
+            yield
+    finally:
+        libc.fflush(None)
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(sink)
+
+
+def _casadi_error(err: Exception) -> str:
+    """The informative line of a CasADi error (its last, without the source location)."""
+    lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+    line = lines[-1] if lines else type(err).__name__
+    return line.split(": ", 1)[1] if line.startswith(".../") and ": " in line else line
 
 
 def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: float = 1e-6,
@@ -239,41 +240,51 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
 
     def solve(i, s):
         tic = time.perf_counter()
-        sol = s(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p, **warm)
+        try:
+            sol = s(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p, **warm)
+        except RuntimeError as err:  # the solver stopped with an error: a failed start, reported as such
+            n_g = np.size(lbg)
+            record = dict(index=i, objective=np.inf, iterations=-1, time_s=time.perf_counter() - tic,
+                          status=f"error: {_casadi_error(err)}", success=False)
+            return record, (x0s[i].copy(), np.full(n_g, np.nan), np.full(n_g, np.nan), np.full(x0s.shape[1], np.nan))
         elapsed = time.perf_counter() - tic
-        stats = s.stats()
+        try:
+            stats = s.stats()
+        except RuntimeError as err:  # some plugins fail to report after a failed solve
+            stats = {"return_status": f"no statistics: {_casadi_error(err)}", "success": False}
+        status = stats.get("return_status", stats.get("unified_return_status", "unknown"))
         f = float(sol["f"])
         record = dict(index=i, objective=f if np.isfinite(f) else np.inf, iterations=int(stats.get("iter_count", -1)),
-                      time_s=elapsed, status=str(stats.get("return_status", "unknown")),
-                      success=bool(stats.get("success", False)))
+                      time_s=elapsed, status=str(status), success=bool(stats.get("success", False)))
         return record, (np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["g"]).ravel(),
                         np.asarray(sol["lam_x"]).ravel())
 
-    first = []
-    if warm_start and n > 1:
-        first = [solve(0, solver)]
-        warm.update(lam_x0=first[0][1][3], lam_g0=first[0][1][1])
-    todo = range(len(first), n)
-    if workers == 1:
-        done = first + [solve(i, solver) for i in _progress(todo, len(todo), progress)]
-    else:
-        import queue
-        from concurrent.futures import ThreadPoolExecutor, as_completed
+    with silenced(getattr(solver, "quiet_stdout", False)):  # plugins that print whatever they are told
+        first = []
+        if warm_start and n > 1:
+            first = [solve(0, solver)]
+            warm.update(lam_x0=first[0][1][3], lam_g0=first[0][1][1])
+        todo = range(len(first), n)
+        if workers == 1:
+            done = first + [solve(i, solver) for i in _progress(todo, len(todo), progress)]
+        else:
+            import queue
+            from concurrent.futures import ThreadPoolExecutor, as_completed
 
-        idle = queue.Queue()
-        for s in solvers:
-            idle.put(s)
-
-        def task(i):
-            s = idle.get()
-            try:
-                return solve(i, s)
-            finally:
+            idle = queue.Queue()
+            for s in solvers:
                 idle.put(s)
 
-        with ThreadPoolExecutor(workers) as pool:
-            futures = [pool.submit(task, i) for i in todo]
-            done = first + [f.result() for f in _progress(as_completed(futures), len(todo), progress)]
+            def task(i):
+                s = idle.get()
+                try:
+                    return solve(i, s)
+                finally:
+                    idle.put(s)
+
+            with ThreadPoolExecutor(workers) as pool:
+                futures = [pool.submit(task, i) for i in todo]
+                done = first + [f.result() for f in _progress(as_completed(futures), len(todo), progress)]
     done.sort(key=lambda item: item[0]["index"])
     records = [d[0] for d in done]
     sols = [d[1] for d in done]
@@ -288,14 +299,16 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
     for i in order:
         f, x = objectives[i], sols[i][0] / scale
         for gi, (gf, gx) in enumerate(groups):
-            if abs(f - gf) <= objective_rtol * max(1.0, abs(gf)) and np.max(np.abs(x - gx)) < 1e-2:
+            if np.isfinite(f) and abs(f - gf) <= objective_rtol * max(1.0, abs(gf)) and np.max(np.abs(x - gx)) < 1e-2:
                 records[i]["group"] = gi
                 break
         else:
             records[i]["group"] = len(groups)
             groups.append((f, x))
     f_best = objectives[best]
-    at_best = np.abs(objectives - f_best) <= objective_rtol * max(1.0, abs(f_best))
+    at_best = np.zeros(len(records), dtype=bool)
+    if np.isfinite(f_best):
+        at_best = np.isfinite(objectives) & (np.abs(objectives - f_best) <= objective_rtol * max(1.0, abs(f_best)))
     x, lam_g, g, _ = sols[best]
     return MultistartResult(
         x=x,

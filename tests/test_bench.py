@@ -28,3 +28,38 @@ def test_mumps_loads_and_a_missing_solver_says_why():
 def test_unknown_suite_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="suite"):
         run("everything", True, tmp_path)
+
+
+def test_readme_block_is_replaced_between_its_markers_only(tmp_path):
+    from adcpdyn.benchmarks.common import replace_marked_block
+
+    begin, end = "<!-- t: begin -->", "<!-- t: end -->"
+    path = tmp_path / "README.md"
+    path.write_text(f"# title\n\nbefore\n{begin}\nold table\n{end}\nafter\n")
+    replace_marked_block(path, begin, end, "new | table")
+    assert path.read_text() == f"# title\n\nbefore\n{begin}\nnew | table\n{end}\nafter\n"
+    path.write_text(f"no markers\n{end}\n")
+    with pytest.raises(ValueError, match=r"^--readme: .* needs the line '<!-- t: begin -->' once"):
+        replace_marked_block(path, begin, end, "x")
+    assert path.read_text() == f"no markers\n{end}\n"  # left untouched
+
+
+def test_solver_rows_are_judged_against_the_best_feasible_objective():
+    """A penalty solution below the best by violating the constraints does not set the best; a
+    failed row never does; starts count as at the best within the relative tolerance."""
+    from adcpdyn.benchmarks.solver_comparison import FEASIBLE, OBJECTIVE_RTOL, _summarise
+
+    def row(f, ok, g_viol, starts, solve_s=1.0):
+        return {"objective": f, "success": ok, "g_violation": g_viol, "box_violation": 0.0, "solve_s": solve_s,
+                "starts": [{"objective": s, "success": ok, "iterations": 10} for s in starts]}
+
+    rows = _summarise({"ipopt": row(100.0, True, 0.0, [100.0, 100.0 * (1 + OBJECTIVE_RTOL / 2), 120.0], 2.0),
+                       "penalty": row(99.9, True, 100 * FEASIBLE, [99.9, 99.9]),
+                       "broken": row(50.0, False, 0.0, [50.0]),
+                       "crashed": {"error": "process exited with status -11"}})
+    assert rows["ipopt"]["best_objective"] == 100.0
+    assert rows["ipopt"]["fraction_at_best"] == pytest.approx(2 / 3)
+    assert rows["penalty"]["objective_rel_to_best"] == pytest.approx(-1e-3)
+    assert rows["penalty"]["fraction_at_best"] == 0.0
+    assert rows["penalty"]["solve_ratio_to_ipopt"] == pytest.approx(0.5)
+    assert "best_objective" not in rows["crashed"]

@@ -343,7 +343,8 @@ class CalibrationProblem:
                                                       ca.jacobian(st_z, z), g_z, ca.jacobian(g_z, z)])
         self.lbg, self.ubg = model.lbg, model.ubg
         self.sigma = model.initial_sigmas()
-        self.solver = build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun)
+        self.solver = build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
+                                   residual_fun=self.residual_fun)
 
     def _moving_bed_choice(self, moving: bool) -> str:
         choice = self.config.moving_bed
@@ -439,7 +440,7 @@ class CalibrationProblem:
         x0s = self.start_points(cfg.n_starts, cfg.seed)
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
         make = lambda: build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
-                                    like=self.solver)
+                                    like=self.solver, residual_fun=self.residual_fun)
         ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
                         make_solver=make, warm_start=cfg.solver.warm_start)
         if cfg.estimate_noise:

@@ -138,7 +138,8 @@ class GapModel:
         g_z = ca.substitute([model.g], [x], [self.scale * z])[0]
         self.lbg, self.ubg = model.lbg, model.ubg
         self.nlp = {"x": z, "p": w, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
-        self.solver = build_solver(self.nlp, self.solver_options, "diagnosis", residuals=self.jacobian_fun)
+        self.solver = build_solver(self.nlp, self.solver_options, "diagnosis", residuals=self.jacobian_fun,
+                                   residual_fun=ca.Function("weighted_residuals", [z, w], [e_z]))
         # the fitted navigation per run (corrected velocities, where-regressors)
         self._nav = [None if V is None else ca.Function("nav", [z], [ca.substitute([V], [x], [self.scale * z])[0]])
                      for V in model.knot_syms]
