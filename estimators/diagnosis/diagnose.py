@@ -656,6 +656,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         for name in config.given:
             current = refit(selected_terms, name, current[1])
             selected_terms += _terms(base, name)
+        if current[0].random_walk:  # the noise levels of the model the candidates are judged against: its own
+            gm, gf = current
+            for _ in range(VCE_ITERATIONS):
+                noise = variance_components(gm, gf)
+                gf = gm.solve(gf.x, noise, fixed=_pinned_effect_parameters(gm, base))
+            current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
         fits[current_name] = current
         cv[current_name] = _cv_residuals(*current, config.cv_folds, config.cv_block_s)
@@ -689,7 +695,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             tried[name] = (labels[name], model, f)
             fits[labels[name]] = (model, f)
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
-            for model, f in [v[1:] for v in tried.values()] + [(base_model, base_fit)]:
+            for model, f in [v[1:] for v in tried.values()] + [fits[start_name]]:
                 levels = variance_components(model, f) if model.random_walk else _group_sigma(model, f.raw)
                 for key, value in levels.items():
                     if key[1] not in PRIOR_GROUPS:  # the walk's intensity is the base's, not a floor
