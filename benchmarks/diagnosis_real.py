@@ -88,7 +88,7 @@ def markdown_table(res: dict) -> str:
         for f, n in cols:
             r = cell.get((f, n, error, size))
             text = "" if r is None else r["verdict"]
-            if r is not None and not r["hit"] and r.get("outcome", "").startswith(("below", "not tried", "outscored")):
+            if r is not None and not r["hit"] and r.get("outcome", "").startswith(("below", "not tried", "outscored", "no gap")):
                 text += f" ({r['outcome'].split(' (')[0].split(':')[0]})"
             if r is not None and "shift_z" in r:  # the file's own effect: its estimate moved, or not
                 text += f" (own {r['expected']} moved {r['shift_z']:.1f} SE)"
@@ -101,7 +101,7 @@ def print_diagnosis(res: dict) -> None:
     print("\ndiagnosis on real files, field errors injected on the recorded channels, clean file's calibration")
     for nav, s in res["summary"].items():
         print(f"  {nav:>11s}: top-1 {100 * (s['top1'] or 0):.0f} % ({100 * (s['top1_detectable'] or 0):.0f} % of the "
-              f"{s['n_detectable']} of {s['n_injected']} the files show at all), false alarms {s['false_alarms']} of "
+              f"{s['n_detectable']} of {s['n_injected']} whose own effect is significant alone), false alarms {s['false_alarms']} of "
               f"{s['clean_files']} clean files, slowest {s['max_seconds'] or 0:.1f} s")
         for e, v in s["per_error"].items():
             print(f"      {e:>22s}: top-1 {100 * v['top1']:.0f} %, smallest detected {v['smallest_detected']}")

@@ -45,7 +45,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
                "shrink": mine["shrink_fraction"] if mine else None, "estimate": mine["params"] if mine else None,
                "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
                "seconds": time.perf_counter() - tic, "statement": r.statement}
-        row["outcome"] = outcome(row, mine, r)
+        row["outcome"] = outcome(row, mine, r, config.min_gap)
         if error == "clean":
             own = tuple(r.selected)
             own_values = {name: next(s for s in r.ranking if s["effect"] == name and s["significant"]) for name in own}
@@ -68,11 +68,12 @@ def carrier(effect: str, own) -> str | None:
     return next((o for o in own if o == effect or effect in get_effect(o).nests), None)
 
 
-def outcome(row: dict, mine: dict | None, result) -> str:
-    """Why an injected error was or was not named, in words: named; not tried (why); below what
-    this file can detect (its own effect fitted alone is not significant: the size is under the
-    file's detection limit, no choice among effects could name it); or outscored (it is
-    significant, another effect was preferred: the two are hard to tell apart on this file)."""
+def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
+    """Why an injected error was or was not named, in words: named; not tried (why); no gap to
+    explain (the held-out excess of the model the candidates are judged against is under
+    ``min_gap``: nothing can be significant, whatever was injected); below detection (its own
+    effect fitted alone is not significant: the size is under what this file shows); or outscored
+    (it is significant, another effect was preferred: the two are hard to tell apart here)."""
     if row["expected"] == "none":
         return "clean" if row["verdict"] == "none" else f"names {row['verdict']}"
     if row["hit"]:
@@ -82,6 +83,8 @@ def outcome(row: dict, mine: dict | None, result) -> str:
         return f"not tried: {why}"
     detail = f"BIC gain {mine['delta_bic_hac'] if result.base.get('navigation') == 'random_walk' else mine['delta_bic']:.0f}, " \
              f"shrink {100 * mine['shrink_fraction']:.0f} %"
+    if not mine["significant"] and result.gap_before <= min_gap:
+        return f"no gap to explain (held-out excess {result.gap_before:.2f}; {detail})"
     if not mine["significant"]:
         return f"below detection ({detail})"
     return f"outscored by {row['verdict'].split('+')[0]} ({detail})"
@@ -111,7 +114,7 @@ def summarise(rows: list) -> dict:
             per.setdefault(r["error"], []).append(r)
     clean = [r for r in rows if r["error"] == "clean"]
     injected = [r for r in rows if r["error"] != "clean"]
-    detectable = [r for r in injected if not r.get("outcome", "").startswith(("below detection", "not tried"))]
+    detectable = [r for r in injected if not r.get("outcome", "").startswith(("below detection", "not tried", "no gap"))]
     return {
         "top1": float(np.mean([r["hit"] for r in injected])) if injected else None,
         # top-1 among the errors this file can show at all (their own effect significant when fitted alone):
@@ -146,8 +149,8 @@ def format_field_selftest(res: dict) -> str:
                              f"{'named' if r['hit'] else 'not named'}")
     lines.append("")
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
-                 f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} this file shows at all "
-                 f"(their effect significant when fitted alone): {100 * (s['top1_detectable'] or 0):.0f} %")
+                 f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} whose own effect is "
+                 f"significant when fitted alone: {100 * (s['top1_detectable'] or 0):.0f} %")
     for e, v in s["per_error"].items():
         smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}"
         lines.append(f"- {e}: top-1 {100 * v['top1']:.0f} %, smallest detected {smallest}")
