@@ -175,19 +175,9 @@ class CalibrationConfig:
     solver: SolverOptions = field(default_factory=SolverOptions)
 
     def __post_init__(self):
-        if self.formulation not in FORMULATIONS:
-            raise ValueError(f"CalibrationConfig.formulation: expected one of {list(FORMULATIONS)}, got {self.formulation!r}")
-        if self.timing not in TIMINGS:
-            raise ValueError(f"CalibrationConfig.timing: expected one of {list(TIMINGS)}, got {self.timing!r}")
-        if self.method not in METHODS:
-            raise ValueError(f"CalibrationConfig.method: expected one of {list(METHODS)}, got {self.method!r}")
-        if self.tangential not in TANGENTIALS:
-            raise ValueError(f"CalibrationConfig.tangential: expected one of {list(TANGENTIALS)}, got {self.tangential!r}")
-        if self.attitude not in ATTITUDES:
-            raise ValueError(f"CalibrationConfig.attitude: expected one of {list(ATTITUDES)}, got {self.attitude!r}")
-        if self.jacobian not in JACOBIANS:
-            raise ValueError(f"CalibrationConfig.jacobian: expected one of {list(JACOBIANS)}, got {self.jacobian!r}")
-        for name, allowed in (("moving_bed", MOVING_BED_CHOICES), ("compass_deviation", DEVIATION_CHOICES),
+        for name, allowed in (("formulation", FORMULATIONS), ("timing", TIMINGS), ("method", METHODS),
+                              ("tangential", TANGENTIALS), ("attitude", ATTITUDES), ("jacobian", JACOBIANS),
+                              ("moving_bed", MOVING_BED_CHOICES), ("compass_deviation", DEVIATION_CHOICES),
                               ("standard_errors", SE_METHODS)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"CalibrationConfig.{name}: expected one of {list(allowed)}, got {getattr(self, name)!r}")
