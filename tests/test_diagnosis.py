@@ -12,7 +12,7 @@ from conftest import refit_without
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.diagnosis import where
-from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, _cv_residuals, diagnose
+from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, _cv_residuals, _folds, diagnose
 from adcpdyn.estimators.diagnosis.selftest import oracle_shrink, with_effect
 from adcpdyn.models.effects import CATALOG, get_effect
 from adcpdyn.cases.simulation import simulate
@@ -63,8 +63,8 @@ def test_leave_fold_out_step_is_exact_for_a_linear_model():
     model = SimpleNamespace(times=t, mask=np.ones(n), weights=lambda sigma: np.ones(n))
     fit = SimpleNamespace(jacobian=A, raw=A @ x - y, sigma={})
     pred = _cv_residuals(model, fit, folds=4, block_s=100 / 12)
-    edges = np.linspace(t.min(), t.max() + 1e-9, 13)
-    fold = (np.searchsorted(edges, t, side="right") - 1) % 4
+    fold = _folds(model, 4, 100 / 12)
+    assert sorted(np.unique(fold)) == [0, 1, 2, 3]
     for k in range(4):
         np.testing.assert_allclose(pred[fold == k], refit_without(A, y, fold != k), atol=1e-5)
 
@@ -298,3 +298,15 @@ def test_an_unknown_stopped_at_its_bound_is_flagged():
     values = {"compass_deviation.A_rad": 0.01, "compass_deviation.C_rad": lo}
     assert at_bounds("compass_deviation", values) == ["compass_deviation.C_rad"]
     assert at_bounds("compass_deviation", {"compass_deviation.C_rad": lo + 1e-3}) == []
+
+
+def test_a_channel_sampled_at_the_folds_period_is_spread_over_the_folds():
+    """Blocks of 2 s dealt to 5 folds: a fix every 10 s fell in one fold when dealt round-robin (that
+    fold's model then had none of the channel: winriver01's GNSS); dealt shuffled, every fold has some."""
+    pings = np.arange(0.0, 340.0, 1.3)
+    fixes = np.arange(14.0, 340.0, 10.0)
+    times = np.concatenate([pings, fixes])
+    model = SimpleNamespace(times=times, row_run=np.zeros(times.size, dtype=int))
+    fold = _folds(model, 5, 2.0)
+    assert set(fold[pings.size:]) == {0, 1, 2, 3, 4}
+    assert np.array_equal(fold, _folds(model, 5, 2.0))  # the same every call

@@ -53,6 +53,7 @@ INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "v
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
 VELOCITY_NAME = re.compile(r"V\d+_[xyz]")
 VCE_ITERATIONS = 3  # variance-component re-estimations of the base (each with a refit)
+FOLD_SEED = 20261125  # the held-out blocks' dealing to folds: shuffled, the same every call
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
 
@@ -188,21 +189,23 @@ def _group_sigma(model: GapModel, raw: np.ndarray) -> dict:
 
 
 def _folds(model, folds: int, block_s: float) -> np.ndarray:
-    """Fold of every row: each run cut into contiguous blocks of about ``block_s``, dealt to the folds.
+    """Fold of every row: each run cut into contiguous blocks of about ``block_s``, dealt to the folds
+    in a shuffled balanced order (seeded: the same every call). Dealt round-robin, a channel sampled
+    every folds x block_s seconds (a GNSS fix every 10 s with 5 folds of 2-s blocks: winriver01) put
+    every one of its rows in one fold, so that fold's model had none of it.
 
     With a velocity per ping (random walk) the channel groups of one block go to different folds:
     the reference held out is predicted from the beams at the same pings (and the beams from the
     reference), never from the prior bridging a hole in every channel at once."""
     row_run = getattr(model, "row_run", np.zeros(model.times.size, dtype=int))
     fold_of = np.zeros(model.times.size, dtype=int)
-    offset = 0
     for k in np.unique(row_run):
         rows = row_run == k
         t = model.times[rows]
         n_blocks = max(folds, int(round((t.max() - t.min()) / block_s)))
         edges = np.linspace(t.min(), t.max() + 1e-9, n_blocks + 1)
-        fold_of[rows] = (np.searchsorted(edges, t, side="right") - 1 + offset) % folds
-        offset += n_blocks
+        deal = np.random.default_rng(FOLD_SEED + int(k)).permutation(n_blocks) % folds
+        fold_of[rows] = deal[np.clip(np.searchsorted(edges, t, side="right") - 1, 0, n_blocks - 1)]
     if getattr(model, "random_walk", False):  # each channel group of a block held out in a fold of its own
         groups = list(dict.fromkeys(k[1] for k in model.sigma_keys))
         shift = np.array([groups.index(k[1]) for k in model.sigma_keys])[model.row_sigma]
