@@ -433,12 +433,13 @@ def validate_case(case: Case, source: str = "<memory>") -> None:
                 c.finite(w, f)
                 if w.size and np.isfinite(w).all():
                     tol_w = time_tolerance_s(tr)
-                    if not (w[:, 1] > w[:, 0]).all():
+                    ordered = w[:, 1] > w[:, 0]
+                    inside = (tr >= w[:, 0] - tol_w) & (tr <= w[:, 1] + tol_w)
+                    if not ordered.all():
                         c.fail(f, "expected each window's end after its start (an averaging interval; leave the dataset "
-                                  "out for instantaneous samples), got " + _q(w[~(w[:, 1] > w[:, 0])][0].tolist()))
-                    elif not ((tr >= w[:, 0] - tol_w) & (tr <= w[:, 1] + tol_w)).all():
-                        c.fail(f, "expected every sample's time inside its window, got time "
-                                  f"{tr[~((tr >= w[:, 0] - tol_w) & (tr <= w[:, 1] + tol_w))][0]:.6g} s outside")
+                                  "out for instantaneous samples), got " + _q(w[~ordered][0].tolist()))
+                    elif not inside.all():
+                        c.fail(f, f"expected every sample's time inside its window, got time {tr[~inside][0]:.6g} s outside")
             tol = max(time_tolerance_s(tr), time_tolerance_s(t))
             if not ((tr >= t[0] - tol) & (tr <= t[-1] + tol)).any():
                 c.fail("/reference/time_s", f"expected a record overlapping the pings (within {tol:.3g} s), got "

@@ -421,9 +421,7 @@ def fit_base(cases, config: DiagnosisConfig, calibration: CalibrationRecord | No
     fit = model.solve(x0, base.sigma0)
     sigma = dict(base.sigma0)
     if model.random_walk:  # a velocity per ping: every noise level and the walk's intensity from the data
-        for _ in range(VCE_ITERATIONS):
-            sigma = variance_components(model, fit)
-            fit = model.solve(fit.x, sigma)
+        fit, sigma = _noise_from_data(model, fit)
         return base, model, fit, sigma
     rms = _group_sigma(model, fit.raw)
     for key in model.sigma_keys:
@@ -431,6 +429,15 @@ def fit_base(cases, config: DiagnosisConfig, calibration: CalibrationRecord | No
             sigma[key] = max(rms[key], 1e-6)
     fit = model.solve(fit.x, sigma)
     return base, model, fit, sigma
+
+
+def _noise_from_data(model: GapModel, fit: Fit, fixed: dict | None = None) -> tuple:
+    """(fit, noise levels) after :data:`VCE_ITERATIONS` variance-component re-estimations, each with
+    a refit (``fixed``: unknowns held at their values)."""
+    for _ in range(VCE_ITERATIONS):
+        sigma = variance_components(model, fit)
+        fit = model.solve(fit.x, sigma, fixed=fixed)
+    return fit, sigma
 
 
 def variance_components(model: GapModel, fit: Fit) -> dict:
@@ -549,16 +556,16 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, noise, n_obs, conf
     shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
     mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
     idx = [model.names.index(n) for n in mine]
-    se = dict(zip(idx, _standard_errors(fit, model, idx)))
+    values = {n: float(fit.x[i]) for n, i in zip(mine, idx)}
+    se = dict(zip(mine, _standard_errors(fit, model, idx)))
     colour = _colour_factor(model, fit, ref_model, ref_fit, noise)
     return EffectScore(
         colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
         # an effect without unknowns is not nested in the model it replaces: no likelihood-ratio test, the BIC compares
         p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else float("nan"),
-        at_bound=at_bounds(name, {n: float(fit.x[model.names.index(n)]) for n in mine}),
-        n_params=k, params={n: float(fit.x[model.names.index(n)]) for n in mine},
-        params_se={n: float(se[model.names.index(n)]) for n in mine}, gap_after=float(gap_after),
+        at_bound=at_bounds(name, values), n_params=k, params=values,
+        params_se={n: float(e) for n, e in se.items()}, gap_after=float(gap_after),
         shrink_fraction=float(shrink), velocity_error_m_s=_velocity_error(model, fit), success=fit.success,
         status=fit.status, iterations=fit.iterations, round=round_)
 
@@ -661,9 +668,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             selected_terms += _terms(base, name)
         if current[0].random_walk:  # the noise levels of the model the candidates are judged against: its own
             gm, gf = current
-            for _ in range(VCE_ITERATIONS):
-                noise = variance_components(gm, gf)
-                gf = gm.solve(gf.x, noise, fixed=_pinned_effect_parameters(gm, base))
+            gf, noise = _noise_from_data(gm, gf, fixed=_pinned_effect_parameters(gm, base))
             current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
         fits[current_name] = current

@@ -50,8 +50,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
             own = tuple(r.selected)
             own_values = {name: next(s for s in r.ranking if s["effect"] == name and s["significant"]) for name in own}
             row["own_effects"] = list(own)
-        elif carrier(expected, own):  # the file carries it already: named when its estimate moves significantly its way
-            mover = carrier(expected, own)
+        elif mover := carrier(expected, own):  # the file carries it already: named when its estimate moves its way
             row.update(_moved({k: v for k, v in r.given.items() if k.split("/")[-1].startswith(mover + ".")},
                               own_values[mover], *SHIFTED_PARAMETER.get(error, (None, 0.0))))
             row["outcome"] = f"own effect, estimate moved {row['shift_z']:.1f} SE" + ("" if row["hit"] else " (not named)")
