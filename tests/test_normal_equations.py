@@ -11,7 +11,7 @@ import pytest
 import scipy.sparse as sp
 from conftest import refit_without
 
-from adcpdyn.estimators.diagnosis.normal_equations import (leave_out_predictions, marginal_covariance,
+from adcpdyn.estimators.diagnosis.normal_equations import (leave_out_predictions, log_det_normal, marginal_covariance,
                                                            quadratic_diagonal, factor, redundancy)
 
 
@@ -29,6 +29,41 @@ def test_leverages_and_covariance_equal_the_dense_inverse():
     np.testing.assert_allclose(quadratic_diagonal(lu, J), np.einsum("ij,jk,ik->i", Jd, A_inv, Jd), rtol=1e-9)
     index = [3, 0, 7]
     np.testing.assert_allclose(marginal_covariance(J, index, 2.5), 2.5 * A_inv[np.ix_(index, index)], rtol=1e-6)
+
+
+def test_log_det_of_the_normal_matrix_equals_the_dense_one():
+    J, _ = _problem(seed=3)
+    sign, dense = np.linalg.slogdet(J.toarray().T @ J.toarray())
+    assert sign > 0
+    assert log_det_normal(J) == pytest.approx(dense, rel=1e-9, abs=1e-6)
+
+
+def test_random_walk_likelihood_is_marginal_over_the_velocities():
+    """On a random-walk base the log-likelihood is the profiled one less 1/2 log det of the per-ping
+    velocities' information at the profiled levels: that block of J^T J (dense here), rows reweighted
+    from the fit's levels; halving every level adds n_V log 4."""
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, fit_base
+    from adcpdyn.estimators.diagnosis.model import VELOCITY_NAME
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=2)
+    base, model, fit, sigma = fit_base([case], DiagnosisConfig(navigation="random_walk"))
+    cols = np.flatnonzero(fit.free)
+    latent = [c for c in cols if VELOCITY_NAME.fullmatch(model.names[c])]
+    assert len(latent) == 3 * case.pings.n
+    rss = fit.group_rss(model)
+    levels = {k: np.sqrt(r / n) for k, (r, n) in rss.items() if n}
+    ratio = np.array([fit.sigma[k] / levels[k] for k in model.sigma_keys])[model.row_sigma] * (model.mask > 0)
+    Jv = ratio[:, None] * sp.csr_matrix(fit.jacobian).toarray()[:, latent]
+    sign, dense = np.linalg.slogdet(Jv.T @ Jv)
+    assert sign > 0
+    assert fit.latent_log_det(model, levels) == pytest.approx(dense, rel=1e-7)
+    profiled = sum(-0.5 * n * (np.log(2 * np.pi * r / n) + 1) for r, n in rss.values() if n)
+    assert fit.log_likelihood(model) == pytest.approx(profiled - 0.5 * dense, rel=1e-9)
+    halved = fit.latent_log_det(model, {k: 0.5 * v for k, v in levels.items()})
+    assert halved - dense == pytest.approx(len(latent) * np.log(4.0), rel=1e-6)
 
 
 def test_banded_selected_inversion_equals_the_dense_inverse():

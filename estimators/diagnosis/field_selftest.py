@@ -81,7 +81,8 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
         why = result.base.get("skipped_effects", {}).get(row["expected"], "not among the candidates")
         return f"not tried: {why}"
     detail = f"BIC gain {mine['delta_bic_hac'] if result.base.get('navigation') == 'random_walk' else mine['delta_bic']:.0f}, " \
-             f"shrink {100 * mine['shrink_fraction']:.0f} %"
+             f"shrink {100 * mine['shrink_fraction']:.0f} %" \
+             + (f", held-out z {mine['heldout_z']:.1f}" if np.isfinite(mine.get("heldout_z", np.nan)) else "")
     if not mine["significant"] and result.gap_before <= min_gap:
         return f"no gap to explain (held-out excess {result.gap_before:.2f}; {detail})"
     if not mine["significant"]:

@@ -17,6 +17,7 @@ re-estimated without rebuilding.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -26,7 +27,9 @@ import scipy.sparse as sp
 from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import periodogram_peak
 from ..measurement_model import EffectTerm, ModelSpec, SurveyModel, channel_slices, hat_basis
+from .normal_equations import as_sparse, log_det_normal
 
+VELOCITY_NAME = re.compile(r"V\d+_[xyz]")  # a navigation velocity unknown (V<knot>_<axis>)
 PRIOR_GROUPS = ("motion", "vertical")  # pseudo-observations of priors (the walk's increments, heave's levels), not data
 
 
@@ -89,12 +92,28 @@ class Fit:
         return out
 
     def log_likelihood(self, model: "GapModel") -> float:
-        """Gaussian log-likelihood with each (run, group)'s noise level profiled out."""
-        ll = 0.0
-        for (rss, n) in self.group_rss(model).values():
+        """Gaussian log-likelihood with each (run, group)'s noise level profiled out; with a velocity
+        per ping (random walk), marginal over those velocities (Laplace, exact for a linear-Gaussian
+        walk): the joint likelihood treats them as parameters and rewards whatever lets their path
+        be smoother (the prior's rows shrink), e.g. a reference delay of any fraction of a ping that
+        mixes two of them; -1/2 log det of their information at the profiled levels charges it back."""
+        ll, levels = 0.0, {}
+        for key, (rss, n) in self.group_rss(model).items():
             if n:
                 ll += -0.5 * n * (np.log(2 * np.pi * max(rss, 1e-300) / n) + 1)
+                levels[key] = np.sqrt(max(rss, 1e-300) / n)
+        if getattr(model, "random_walk", False) and self.jacobian is not None:
+            ll -= 0.5 * self.latent_log_det(model, levels)
         return ll
+
+    def latent_log_det(self, model: "GapModel", levels: dict) -> float:
+        """log det of the per-ping velocities' information J_V^T W J_V, the rows weighted by the noise
+        ``levels`` ((run, group) -> sigma) instead of the fit's own."""
+        J = as_sparse(self.jacobian)
+        cols = np.flatnonzero(self.free) if self.free is not None else np.arange(J.shape[1])
+        latent = cols[[VELOCITY_NAME.fullmatch(model.names[c].split("/")[-1]) is not None for c in cols]]
+        ratio = np.array([self.sigma[k] / levels.get(k, self.sigma[k]) for k in model.sigma_keys])[model.row_sigma]
+        return log_det_normal(sp.diags(np.where(model.mask > 0, ratio, 0.0)) @ J[:, latent])
 
     def effect_values(self, model: "GapModel") -> dict:
         return {n: float(self.x[i]) for n, i in zip(model.effect_names, model.effect_index)}

@@ -137,6 +137,14 @@ def leave_out_predictions(J, e: np.ndarray, used: np.ndarray, fold_of: np.ndarra
     return pred
 
 
+def log_det_normal(J) -> float:
+    """log det(J^T J) (ridge included) from one sparse LU: the sum of log |U_ii|."""
+    J = as_sparse(J)
+    if J.shape[1] == 0:
+        return 0.0
+    return float(np.sum(np.log(np.abs(factor((J.T @ J).tocsc()).U.diagonal()))))
+
+
 def inverse_columns(J, index) -> np.ndarray:
     """Columns ``index`` of (J^T J)^-1 (unknowns x len(index)), by solves against one sparse LU."""
     J = as_sparse(J)
