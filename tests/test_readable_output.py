@@ -7,7 +7,9 @@ whole-number ticks on count axes."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -126,3 +128,53 @@ def test_radius_vectors_one_length_unit_and_the_legend_clear_of_panels_and_ticks
     import matplotlib.pyplot as plt
 
     plt.close(fig)
+
+
+# -------------------------------------------------------------------------------- benchmark figures
+def _captured(monkeypatch, module):
+    figs = []
+    monkeypatch.setattr(module, "save_figure", lambda fig, path: figs.append(fig))
+    return figs
+
+
+def _whole(ticks, low, high) -> bool:
+    inside = [t for t in ticks if low - 1e-9 <= t <= high + 1e-9]
+    return bool(inside) and all(float(t).is_integer() for t in inside)
+
+
+def test_survey_bench_figure_counts_in_whole_numbers(monkeypatch):
+    from adcpdyn.benchmarks import survey
+
+    figs = _captured(monkeypatch, survey)
+    rng = np.random.default_rng(0)
+    single = {"misalignment_error_deg": 0.5, "misalignment_se_deg": 2.0}
+    res = {"starts": 24, "scale": [{"runs": k, "setup_s": 1.0, "solve_s": 2.0 * k, "total_s": 1.0 + 2.0 * k} for k in (1, 2, 4)],
+           "accuracy": [{"survey_seed": s, "joint": {"misalignment_error_deg": 0.1, "misalignment_se_deg": 0.1},
+                         "singles": [single, single]} for s in (101, 102)],
+           "coverage": {"rows": [{"misalignment_error_deg": e, "misalignment_se_deg": 1.0, "misalignment_white_se_deg": 0.5}
+                                 for e in rng.normal(size=7)]}}
+    survey.figure_survey(res, Path("s.png"))
+    fig = figs[-1]
+    _draw(fig)
+    a, b, c = fig.axes
+    assert _whole(a.get_xticks(), 1, 4) and list(b.get_xticks()) == [101, 102]
+    assert _whole(c.get_yticks(), *c.get_ylim())
+    assert all(ax.get_xlabel() and ax.get_ylabel() for ax in (a, b, c))
+    assert "(count)" in a.get_xlabel() and "(count)" in c.get_ylabel() and "(s)" in a.get_ylabel()
+    assert not _fonts_at_least(fig, MIN_FONT_PT)
+
+
+def test_other_bench_figures_label_their_axes_with_units(monkeypatch):
+    from adcpdyn.benchmarks import common, formulations, scale
+
+    results = Path(common.__file__).parent / "results"
+    for module, figure, name in ((formulations, formulations.figure_formulations, "formulations_quick"),
+                                 (scale, scale.figure_scale, "scale_quick")):
+        figs = _captured(monkeypatch, module)
+        figure(json.loads((results / f"{name}.json").read_text()), Path("x.png"))
+        fig = figs[-1]
+        _draw(fig)
+        for ax in fig.axes:
+            assert re.search(r"\((s|MB|mm/s|fraction|pings)\)$", ax.get_ylabel()), ax.get_ylabel()
+            assert ax.get_xlabel(), name
+        assert not _fonts_at_least(fig, MIN_FONT_PT), name
