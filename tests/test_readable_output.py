@@ -7,16 +7,148 @@ whole-number ticks on count axes."""
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import adcpdyn
+from adcpdyn.cli import main
+from adcpdyn.text import TABLE_WIDTH, Column, text_table
 
 MIN_FONT_PT = 8.0
+PERCENT = re.compile(r"^(-?\d+\.\d|n/a)$")  # one decimal, never four
+
+
+def _table(text: str, first: str, n_rows: int) -> list[str]:
+    """The first table in ``text``: its header (starting with ``first``), unit line and rows."""
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith(first + " "))
+    return lines[start:start + 2 + n_rows]
+
+
+def _metric_rows(speed_m_s: float, distance_m: float) -> dict:
+    base = {"mean_m_s": speed_m_s, "sd_m_s": 0.21, "rsd_pct": 12.3456, "mae_m_s": 0.0314, "mre_pct": 13.0123,
+            "error_sd_m_s": 0.0504, "error_rsd_pct": 12.4444, "displacement_m": distance_m,
+            "distance_error_m": 3.1911, "distance_re_pct": 3.5231, "vector_error_rms_m_s": 0.1581,
+            "direction_error_rms_deg": 26.31}
+    rows = {m: dict(base) for m in ("asc", "adc", "paper_literal", "rootfinder", "oracle")}
+    rows["paper_literal"]["mre_pct"] = float("nan")
+    rows["reference"] = {k: (0.0 if "error" in k or k.startswith(("mae", "mre")) else v) for k, v in base.items()}
+    return rows
+
+
+@pytest.mark.parametrize("speed_m_s, distance_m", [(0.0085, 0.381), (5.2, 12345.678)])  # a pool boat, a ship
+def test_metric_table_fits_100_characters_with_units_one_decimal_percentages_and_a_legend(speed_m_s, distance_m):
+    from adcpdyn.estimators.metrics import METRIC_COLUMNS, format_table
+
+    text = format_table(_metric_rows(speed_m_s, distance_m))
+    lines = text.splitlines()
+    assert max(len(ln) for ln in lines) <= TABLE_WIDTH, text
+    table = _table(text, "method", 6)
+    assert table[1].split() == [unit for _, unit, _, _ in METRIC_COLUMNS.values()]  # a unit under every column
+    percent = [k for k, (_, unit, _, _) in enumerate(METRIC_COLUMNS.values()) if unit == "%"]
+    for row in table[2:]:
+        cells = row.split()[1:]
+        assert len(cells) == len(METRIC_COLUMNS), row
+        assert all(PERCENT.match(cells[k]) for k in percent), row
+        assert all(len(c.partition(".")[2]) <= 3 for c in cells), row
+    legend = " ".join(lines[len(table):])
+    for abbreviation in ("R:", "MAE", "MRE", "Err:", "Disp:", "Dist:", "VecErr", "DirErr"):
+        assert abbreviation in legend, abbreviation
+    assert ("12346 " if distance_m > 1000 else "0.381 ") in text and "12345.6" not in text  # metres: no spurious digits
+
+
+def test_a_table_too_wide_is_split_into_blocks_each_repeating_the_first_column():
+    columns = [Column(f"k{i}", f"head{i}", "m", 3) for i in range(20)]
+    rows = {"first_case": {f"k{i}": 1234.5678 * i for i in range(20)}, "second": {f"k{i}": -1.0 for i in range(20)}}
+    text = text_table(rows, columns, first="case", legend="head0..head19: twenty lengths " * 8)
+    lines = text.splitlines()
+    assert max(len(ln) for ln in lines) <= TABLE_WIDTH
+    headers = [ln for ln in lines if ln.startswith("case ")]
+    assert len(headers) >= 2
+    assert sorted(h for ln in headers for h in ln.split()[1:]) == sorted(c.head for c in columns)
+    assert sum(ln.startswith("first_case ") for ln in lines) == len(headers)
+
+
+def test_diagnosis_effect_table_and_formulation_table_fit_100_characters():
+    from adcpdyn.estimators.diagnosis.report import parameter_text
+    from adcpdyn.estimators.formulation_compare import format_rows
+
+    row = {"objective": 1234.5678, "max_constraint_violation": 1.2e-9, "time_s": 1.234, "iterations_best": 23,
+           "iterations_mean": 31.25, "fraction_at_best": 0.875, "n_unobservable": 0, "n_weak": 1,
+           "tangential_radial_rms_m_s": 0.00041, "lever_arm_rms_error_m": 0.0123}
+    text = format_rows({f: row for f in ("paper", "exact", "minimal", "free")})
+    assert max(len(ln) for ln in text.splitlines()) <= TABLE_WIDTH, text
+    assert text.splitlines()[1].split() == ["-", "-", "count", "count", "s", "fraction", "count", "count", "mm/s", "mm"]
+    assert parameter_text("effect0.C_rad", np.radians(-28.6), np.radians(1.2)) == "C -28.6 deg ± 1.2 deg"
+    assert parameter_text("effect0.omega_rad_s", 7.2, 0.03) == "omega +7.2 rad/s ± 0.03 rad/s"
+    assert parameter_text("effect0.C_rad", -0.5, 0.0, at_bound=True).endswith("at its bound: not determined")
+
+
+def test_selftest_confusion_matrix_fits_100_characters():
+    from adcpdyn.api import _diagnosis_config
+    from adcpdyn.estimators.diagnosis.selftest import format_summary, summarise
+
+    labels = list(_diagnosis_config(None).effects)
+    rows = [dict(expected=e, verdict=v, correct=e == v, remaining_gap_significant=False, where_top="bt",
+                 shrink_reported=0.5, shrink_oracle=0.5, platform="pool")
+            for e, v in [("installation_misalignment", "installation_misalignment"), ("heave", "surge+heave"),
+                         ("none", "none")] * 40]
+    text = format_summary(summarise(rows, labels))
+    matrix = text.split("\ncases:")[0].splitlines()
+    assert len(matrix) == len(labels) + 3 and max(len(ln) for ln in matrix) <= TABLE_WIDTH, text
+    row = next(ln for ln in matrix if ln.split()[1:2] == ["heave"])
+    surge = labels.index("surge") + 1
+    assert int(row.split()[1 + surge]) == 40  # heave's cases counted in surge's numbered column
+
+
+def test_demo_and_compare_tables_fit_and_warnings_go_to_stderr(tmp_path, capfd, monkeypatch):
+    monkeypatch.setenv("ADCPDYN_PROGRESS", "0")
+    out_dir = tmp_path / "demo"
+    assert main(["demo", "--starts", "2", "--scenario", "pool_m1", "--out", str(out_dir)]) == 0
+    out, err = capfd.readouterr()
+    table = _table(out, "method", 6)
+    assert max(len(ln) for ln in table) <= TABLE_WIDTH and table[-1].startswith("truth "), table
+    assert "warning:" not in out and "warning: " in err  # the head-frame attitude's warning
+    assert "multistart" not in err and "\r" not in err
+    assert main(["compare", str(out_dir / "pool_m1.h5"), "--calibration", str(out_dir / "calibration.json")]) == 0
+    out, err = capfd.readouterr()
+    table = _table(out, "method", 6)
+    assert max(len(ln) for ln in out.splitlines()) <= TABLE_WIDTH, out
+    assert table[1].split()[:3] == ["mm/s", "mm/s", "%"]
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_zero_silences_every_bar_even_on_a_terminal(monkeypatch):
+    from adcpdyn import batch
+    from adcpdyn.progress import progress_bar_enabled
+    from adcpdyn.solvers.multistart import multistart
+
+    class Broken:  # a solver that fails at once: the bar is all that would print
+        def __call__(self, **kw):
+            raise RuntimeError("no solve")
+
+        def stats(self):
+            return {}
+
+    for setting, shown in (("0", False), ("", True)):
+        terminal = _Terminal()
+        monkeypatch.setattr(sys, "stderr", terminal)
+        monkeypatch.setenv("ADCPDYN_PROGRESS", setting)
+        assert progress_bar_enabled() is shown
+        multistart(Broken(), np.zeros((3, 2)), -np.ones(2), np.ones(2), np.zeros(0), np.zeros(0), np.zeros(0))
+        with batch._bar(2, None) as bar:
+            assert bar.disable is not shown
+        assert ("multistart" in terminal.getvalue()) is shown
 
 
 # ------------------------------------------------------------------------------------------ figures
@@ -94,6 +226,17 @@ def test_channel_order_and_labels_of_a_joint_diagnosis():
     assert [channel_label(c) for c in sorted(shuffled, key=channel_sort_key)] == [
         "BT beam 1", "BT beam 2", "BT beam 3", "range beam 1", "reference north", "reference down", "heading", "pitch",
         "roll", "motion prior north", "motion prior east"]
+
+
+def test_diagnose_prints_within_100_characters_with_hz_and_units(diagnosis):
+    from adcpdyn.estimators.diagnosis.report import table, terminal_text
+
+    _, result = diagnosis
+    text = terminal_text(result)
+    assert max(len(ln) for ln in text.splitlines()) <= TABLE_WIDTH, text
+    assert "rad/s" not in text.split("Which effect")[0] and " Hz" in text
+    assert "bt 0.00" in text and re.search(r"bt \d\.\d+ m/s", text) and re.search(r"heading \d\.\d+ deg", table(result))
+    assert "delay +0.00" in text and " s ± " in text  # the latency in seconds, said so
 
 
 def test_panel_labels_go_past_z_in_letters():

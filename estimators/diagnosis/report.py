@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ...cases.atomic import atomic_path
+from ...text import noise_level_text
 from ..calibration.result import jsonable
 from .model import noise_key
 
@@ -38,9 +39,7 @@ def table(result, n_where: int = 6) -> str:
               "| effect | delta LL | delta BIC | p-value | gap after | shrink | significant | parameters (± SE) | solver |",
               "|---|---:|---:|---:|---:|---:|:---:|---|---|"]
     for s in r.ranking:
-        bound = s.get("at_bound", [])
-        params = ", ".join(f"{n.split('.', 1)[1]} {v:+.4g} " + ("at its bound: not determined" if n in bound else
-                                                                f"± {s['params_se'][n]:.2g}") for n, v in s["params"].items())
+        params = parameters_text(s)
         if len(params) > 160:
             params = params[:157] + "..."
         p = "n/a (no unknowns)" if not np.isfinite(s["p_value"]) else f"{s['p_value']:.2g}"
@@ -49,7 +48,88 @@ def table(result, n_where: int = 6) -> str:
                      f"{params} | {s['status']} |")
     if r.base.get("skipped_effects"):
         lines += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in r.base["skipped_effects"].items())]
-    lines += ["", "Noise levels: " + ", ".join(f"{g} {v:.3g}" for g, v in r.noise.items())]
+    lines += ["", "Noise levels (one standard deviation): " + ", ".join(noise_level_text(g, v) for g, v in r.noise.items())]
+    return "\n".join(lines) + "\n"
+
+
+UNIT_SUFFIXES = (("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_s", "s"), ("_m", "m"))  # from the name; _rad in deg
+
+
+def parameter_text(name: str, value: float, se: float | None, at_bound: bool = False) -> str:
+    """One fitted unknown in the field's units: ``delay 0.0077 s ± 0.0011 s``, angles in degrees
+    (``C -28.6 deg ± 1.2 deg``); one held at its bound says so instead of a standard error."""
+    short = name.split(".", 1)[-1]
+    unit, scale = "", 1.0
+    if short.endswith("_rad"):  # an angle (a rate is _rad_s)
+        short, unit, scale = short[:-4], "deg", float(np.degrees(1.0))
+    else:
+        for suffix, u in UNIT_SUFFIXES:
+            if short.endswith(suffix):
+                short, unit = short[:-len(suffix)], u
+                break
+    u = f" {unit}" if unit else ""
+    if at_bound:
+        return f"{short} {scale * value:+.4g}{u} at its bound: not determined"
+    spread = "± n/a" if se is None or not np.isfinite(se) else f"± {scale * se:.2g}{u}"
+    return f"{short} {scale * value:+.4g}{u} {spread}"
+
+
+def parameters_text(score: dict) -> str:
+    """An effect's fitted unknowns (:func:`parameter_text`), comma separated."""
+    bound = score.get("at_bound", [])
+    return ", ".join(parameter_text(n, v, score["params_se"].get(n), n in bound) for n, v in score["params"].items())
+
+
+EFFECT_LEGEND = ("dLL, dBIC: change of log-likelihood and BIC against the base (dBIC < 0: better); p: p-value; "
+                 "gap after: held-out excess chi2/n with the effect; shrink: share of the gap removed; sig: significant")
+
+
+def terminal_text(result, n_where: int = 6, width: int | None = None) -> str:
+    """What ``adcpdyn diagnose`` prints: :func:`table`'s content for a terminal, no line (table,
+    list or sentence) wider than :data:`~adcpdyn.text.TABLE_WIDTH` characters."""
+    import textwrap
+
+    from ...text import TABLE_WIDTH, Column, text_table
+
+    width = width or TABLE_WIDTH
+    r = result
+
+    def para(text: str, indent: str = "") -> list:
+        return textwrap.wrap(text, width=width, subsequent_indent=indent or "  ")
+
+    lines = [f"Diagnosis of {r.case}"]
+    lines += para(f"Verdict: {r.verdict} — {r.statement}")
+    lines += para(f"Held-out gap (excess chi-square per sample, 0 = fits to the noise): before {r.gap_before:.3f} "
+                  f"(z = {r.gap_z_before:.1f}), after {r.gap_after:.3f} (z = {r.gap_z_after:.1f}).")
+    if r.velocity_error_before_m_s is not None:
+        lines += para(f"Velocity error after correction (RMS horizontal, vs truth): base model "
+                      f"{1000 * r.velocity_error_before_m_s:.1f} mm/s, with the verdict {1000 * r.velocity_error_after_m_s:.1f} mm/s.")
+    lines += ["", "Where the gap lies (base model, held-out residuals; score z: chi-square excess in SDs), worst first:"]
+    for k, w in enumerate(r.where[:n_where]):
+        lines += textwrap.wrap(f"{k + 1:>2}. {w['channel']} (z = {w['score']:.1f}): {w['detail']}", width=width,
+                               subsequent_indent="      ")
+    lines += ["", "Which effect:"]
+    rows = {s["effect"]: s for s in r.ranking}
+
+    def cell(column, name, value):
+        if column.key == "p_value":
+            return "n/a" if value is None or not np.isfinite(value) else f"{value:.2g}"  # n/a: no unknowns
+        if column.key == "significant":
+            return "yes" if value else ""
+        return column.text(value)
+
+    columns = [Column("delta_ll", "dLL", "-", 1), Column("delta_bic", "dBIC", "-", 1), Column("p_value", "p", "-"),
+               Column("gap_after", "gap after", "chi2/n", 3), Column("shrink_fraction", "shrink", "%", 0, 100.0),
+               Column("significant", "sig", "")]
+    if rows:
+        lines.append(text_table(rows, columns, first="effect", legend=EFFECT_LEGEND, width=width, cell=cell))
+        lines.append("Fitted unknowns (± SE) and the solver's status:")
+        for s in r.ranking:
+            lines += textwrap.wrap(f"  {s['effect']}: {parameters_text(s) or 'no unknowns'}; {s['status']}", width=width,
+                                   subsequent_indent="      ")
+    if r.base.get("skipped_effects"):
+        lines += para("Not tried: " + "; ".join(f"{k} ({v})" for k, v in r.base["skipped_effects"].items()))
+    lines += para("Noise levels (one standard deviation): " + ", ".join(noise_level_text(g, v) for g, v in r.noise.items()))
     return "\n".join(lines) + "\n"
 
 
