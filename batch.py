@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import sys
 import time
 from dataclasses import dataclass
 
@@ -112,7 +111,9 @@ def resolve_scheduler(scheduler: str, n_jobs: int) -> str:
 def _bar(total: int, progress: bool | None):
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="case", desc="cases", disable=not (sys.stderr.isatty() if progress is None else progress))
+    from .progress import progress_bar_enabled
+
+    return tqdm(total=total, unit="case", desc="cases", disable=not (progress_bar_enabled() if progress is None else progress))
 
 
 def run_batch(jobs, scheduler: str = AUTO, n_workers: int | None = None, progress: bool | None = None) -> list[dict]:

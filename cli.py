@@ -36,13 +36,9 @@ _LIVE_FD: int | None = None  # the real stderr while descriptor 2 is held (see _
 
 def progress_enabled() -> bool:
     """Progress lines on stderr: when it is a terminal, or as ``ADCPDYN_PROGRESS=1|0`` says (stdout stays clean)."""
-    env = os.environ.get("ADCPDYN_PROGRESS", "").strip()
-    if env in ("0", "1"):
-        return env == "1"
-    try:
-        return os.isatty(_LIVE_FD if _LIVE_FD is not None else 2)
-    except OSError:
-        return False
+    from .progress import progress_enabled as enabled
+
+    return enabled(_LIVE_FD if _LIVE_FD is not None else 2)
 
 
 def warn(text: str) -> None:
@@ -50,20 +46,7 @@ def warn(text: str) -> None:
     print(f"warning: {text}", file=sys.stderr)
 
 
-NOISE_UNITS = {"bt": "m/s", "reference": "m/s", "vertical": "m/s", "range": "m", "motion": "m/s/sqrt(s)"}
-
-
-def noise_levels_line(sigma: dict) -> str:
-    """The noise levels with their units: angles in degrees, velocities in m/s, ranges in m."""
-    parts = []
-    for k, v in sigma.items():
-        if v is None:
-            continue
-        if k in ("heading", "pitch", "roll"):
-            parts.append(f"{k} {np.degrees(v):.3g} deg")
-        else:
-            parts.append(f"{k} {v:.3g} {NOISE_UNITS.get(k, '')}".rstrip())
-    return "noise levels (one standard deviation): " + ", ".join(parts)
+from .text import noise_levels_line  # noqa: E402  (the calibration's noise levels, with units)
 
 
 class _Progress:
@@ -191,7 +174,7 @@ def cmd_import(args) -> int:
     if warning:
         warn(f"attitude: {warning}")
     if prov.get("reader_messages"):
-        print(f"note: {prov['reader_messages']}")
+        warn(prov["reader_messages"])
     return 0
 
 
@@ -582,7 +565,7 @@ def cmd_diagnose(args) -> int:
     from .api import diagnose
     from .cases.atomic import check_output_file
     from .cases.collect import collect_case_paths, is_many
-    from .estimators.diagnosis.report import table, write_report
+    from .estimators.diagnosis.report import terminal_text, write_report
 
     if is_many(args.case) and not args.joint:
         raise ValueError(f"diagnose: {' '.join(args.case)}: several cases (a folder, a glob or more than one file): add "
@@ -597,7 +580,7 @@ def cmd_diagnose(args) -> int:
     for w in result.base.get("case_warnings", []):
         warn(f"{w}")
     written = write_report(result, args.out, fmt=args.format)
-    print(table(result))
+    print(terminal_text(result))
     print("wrote " + ", ".join(str(p) for p in written))
     return 0 if result.base["success"] else 1
 
@@ -613,9 +596,9 @@ def _diagnose_field_selftest(args) -> int:
     res = field_selftest(args.case[0], args.calibration, navigation=args.navigation, effects=args.effects,
                          accept_other_instrument=args.accept_other_instrument,
                          attitude=args.attitude, out=args.out, fmt=args.format,
-                         progress=lambda text: print(text, file=sys.stderr, flush=True))
+                         progress=_Progress("diagnose"))
     for n in res["notes"]:
-        print(f"note: {n}")
+        warn(n)
     print(format_field_selftest(res))
     print(f"wrote {args.out} and its .md and figure beside it")
     return 0

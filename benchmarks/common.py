@@ -109,6 +109,13 @@ def replace_marked_block(path: Path, begin: str, end: str, text: str) -> None:
     write_text("".join(lines[:i + 1]) + block + "".join(lines[j:]), Path(path))
 
 
+def integer_ticks(axis) -> None:
+    """Ticks at whole numbers only, for an axis that counts (transects, cases, pings): never "1.5 transects"."""
+    from matplotlib.ticker import MaxNLocator
+
+    axis.set_major_locator(MaxNLocator(integer=True))
+
+
 def save_figure(fig, path: Path) -> None:
     """Save a matplotlib figure atomically and close it."""
     import matplotlib.pyplot as plt

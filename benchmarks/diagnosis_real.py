@@ -128,13 +128,16 @@ def figure_diagnosis(res: dict, path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(8, 4))
     errors = list(dict.fromkeys(r["error"] for r in res["rows"] if r["error"] != "clean"))
-    for k, nav in enumerate(NAVIGATIONS):
+    navigations = [nav for nav in NAVIGATIONS if any(r["navigation"] == nav for r in res["rows"])]  # only what ran
+    width = 0.8 / max(len(navigations), 1)
+    for k, nav in enumerate(navigations):
         hits = [np.mean([r["hit"] for r in res["rows"] if r["navigation"] == nav and r["error"] == e] or [0]) for e in errors]
-        ax.bar(np.arange(len(errors)) + 0.4 * k, hits, width=0.4, label=nav)
-    ax.set_xticks(np.arange(len(errors)) + 0.2, errors, rotation=20, fontsize=8)
-    ax.set_ylabel("top-1 (share of files and sizes)")
+        ax.bar(np.arange(len(errors)) + width * k, hits, width=width, label=nav)
+    ax.set_xticks(np.arange(len(errors)) + width * (len(navigations) - 1) / 2, errors, rotation=20, fontsize=9)
+    ax.set_xlabel("injected error (its unit in its name)")
+    ax.set_ylabel("named first (fraction of files and sizes)")
     ax.set_ylim(0, 1)
-    ax.legend()
+    ax.legend(title="base navigation", fontsize=9, title_fontsize=9)
     ax.set_title("diagnosis on real files, injected field errors")
     fig.tight_layout()
     save_figure(fig, path)

@@ -67,11 +67,16 @@ def figure_formulations(res: dict, path: Path) -> None:
         ax[0].bar(x, [1e3 * med[f]["tangential_radial_rms_m_s"] for f in forms], width, label=sc)
         ax[1].bar(x, [med[f]["time_s"] for f in forms], width, label=sc)
         ax[2].bar(x, [med[f]["fraction_at_best"] for f in forms], width, label=sc)
-    for a, title in zip(ax, ("tangential radial RMS error (mm/s)", "wall time per calibration (s)",
-                             "share of starts at the best")):
+    for k, (a, title, label) in enumerate(zip(ax, ("tangential radial velocity error", "wall time per calibration",
+                                                   "starts that reached the best"),
+                                              ("RMS error (mm/s)", "wall time (s)", "share of starts (fraction)"))):
         a.set_xticks(np.arange(len(forms)) + width * (len(scen) - 1) / 2, forms)
-        a.set_title(title, fontsize=9)
-    ax[0].legend(fontsize=8)
-    fig.suptitle(f"formulations: medians over {len(res['seeds'])} seeds, {res['starts']} starts")
+        a.set_xlabel("lever-arm formulation")
+        a.set_ylabel(label)
+        a.set_title(f"({'abc'[k]}) {title}", fontsize=10)
+    ax[2].set_ylim(0, 1)
+    ax[0].legend(fontsize=9, title="scenario", title_fontsize=9)
+    n = len(res["seeds"])
+    fig.suptitle(f"formulations: medians over {n} seed{'s' if n != 1 else ''}, {res['starts']} starts")
     fig.tight_layout()
     save_figure(fig, path)

@@ -95,22 +95,28 @@ def figure_scale(res: dict, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import ScalarFormatter
 
     n = np.array([r["n_pings"] for r in res["rows"]], float)
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     for k, label in (("calibration_s", "calibration"), ("setup_s", "set-up (NLP, solver)"), ("solve_s", "solve")):
-        ax[0].loglog(n, [r[k] for r in res["rows"]], "o-", label=f"{label} (exp {res.get('exponents', {}).get(k, np.nan):.2f})")
+        exponent = res.get("exponents", {}).get(k, np.nan)
+        ax[0].loglog(n, [r[k] for r in res["rows"]], "o-", label=f"{label} (growth exponent {exponent:.2f})")
     if n.size:
         ax[0].loglog(n, n / n[0] * res["rows"][0]["calibration_s"], "k:", label="linear from the smallest")
     ax[0].axhline(10.0, color="r", lw=0.8, ls="--", label="target at 1e5 pings: 10 s")
-    ax[0].set_xlabel("pings")
-    ax[0].set_ylabel("seconds")
-    ax[0].legend(fontsize=7)
+    ax[0].set_xlabel("run length (pings)")
+    ax[0].set_ylabel("wall time (s)")
+    ax[0].set_title("(a) calibration time", fontsize=10)
+    ax[0].legend(fontsize=8)
     ax[1].loglog(n, [r["peak_rss_mb"] for r in res["rows"]], "o-",
-                 label=f"peak RSS (exp {res.get('exponents', {}).get('peak_rss_mb', np.nan):.2f})")
-    ax[1].set_xlabel("pings")
-    ax[1].set_ylabel("MB")
-    ax[1].legend(fontsize=7)
+                 label=f"peak RSS (growth exponent {res.get('exponents', {}).get('peak_rss_mb', np.nan):.2f})")
+    ax[1].set_xlabel("run length (pings)")
+    ax[1].set_ylabel("peak resident memory (MB)")
+    ax[1].yaxis.set_major_formatter(ScalarFormatter())  # 200, 400 MB rather than 2 x 10^2
+    ax[1].yaxis.set_minor_formatter(ScalarFormatter())
+    ax[1].set_title("(b) peak memory of the worker", fontsize=10)
+    ax[1].legend(fontsize=8)
     fig.suptitle(f"calibration cost against run length ({res['scenario']} at ~5 Hz)")
     fig.tight_layout()
     save_figure(fig, path)

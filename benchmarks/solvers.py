@@ -190,7 +190,7 @@ def figure_solvers(res: dict, path: Path) -> None:
     ax.barh(y, solve, left=setup, color="C0", label=f"{res['starts']}-start multistart")
     ax.set_yticks(y, names, fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("seconds (one run, shared 2-core machine)")
+    ax.set_xlabel("wall time (s; one run, shared 2-core machine)")
     ax.legend(fontsize=8)
     ax.set_title(f"IPOPT variants on pool_m0 seed {res['seed']}")
     y = np.arange(len(solvers))
@@ -204,13 +204,13 @@ def figure_solvers(res: dict, path: Path) -> None:
                 bar.set_hatch("//")
         for yi, n in zip(y, solvers):
             if "error" in case["rows"].get(n, {}):
-                bx.text(1.05, yi + 0.4 * k - 0.2, "not measured (time limit or crash)", va="center", fontsize=7,
+                bx.text(1.05, yi + 0.4 * k - 0.2, "not measured (time limit or crash)", va="center", fontsize=8,
                         color=f"C{k}")
     bx.axvline(1.0, color="k", lw=0.8)
     bx.set_xscale("log")
     bx.set_yticks(y, solvers, fontsize=8)
     bx.invert_yaxis()
-    bx.set_xlabel("solve time / IPOPT's (hatched: failed, or no start at the best)")
+    bx.set_xlabel("solve time / IPOPT's (ratio; hatched: failed, or no start at the best)")
     bx.legend(fontsize=8)
     bx.set_title(f"NLP solvers, {res['comparison']['starts']} starts")
     fig.tight_layout()

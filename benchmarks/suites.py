@@ -281,8 +281,9 @@ def figure_calibration(res: dict, path: Path) -> None:
     ax.set_xticks([3 * k + 1 for k in range(len(res["scenarios"]))], list(res["scenarios"]))
     ax.axhline(3.0, color="r", lw=0.8, ls="--", label="target 3 mm/s")
     ax.set_ylabel("tangential radial RMS error (mm/s)")
-    ax.legend(fontsize=7)
-    ax.set_title(f"calibration over {len(res['seeds'])} seeds")
+    ax.set_xlabel("scenario (one point per seed)")
+    ax.legend(fontsize=8)
+    ax.set_title(f"(a) calibration over {len(res['seeds'])} seeds", fontsize=10)
     if deep:  # installation yaw per seed: joint against Qiao et al. (inside the grey cone: joint better)
         ax = axes[0, 1]
         lim = 1.1 * max(max(abs(r["qiao_error_deg"][0]), abs(r["joint_error_deg"][0])) for r in deep)
@@ -295,8 +296,8 @@ def figure_calibration(res: dict, path: Path) -> None:
         ax.set_ylim(-lim, lim)
         ax.set_xlabel("Qiao et al. yaw error (deg)")
         ax.set_ylabel("joint yaw error (deg)")
-        ax.legend(fontsize=7)
-        ax.set_title("installation yaw per seed")
+        ax.legend(fontsize=8)
+        ax.set_title("(b) installation yaw per seed", fontsize=10)
     fig.tight_layout()
     save_figure(fig, path)
 
@@ -307,16 +308,16 @@ def figure_correction(res: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(8.5, 4))
     for k, m in enumerate(("asc", "adc", "rootfinder", "rootfinder_interpreted")):
         for sc, marker in zip(CORRECTION_SCENARIOS, ("o-", "s")):
             rows = [r for r in res["rows"] if r["scenario"] == sc]
             ax.loglog([r["n_pings"] for r in rows], [r[f"{m}_pings_per_s"] for r in rows], marker, color=f"C{k}",
                       label=f"{m} ({sc})")
     ax.axhline(1e6, color="r", lw=0.8, ls="--", label="target 1e6 pings/s")
-    ax.set_xlabel("pings")
-    ax.set_ylabel("pings per second")
-    ax.legend(fontsize=7)
+    ax.set_xlabel("run length (pings)")
+    ax.set_ylabel("throughput (pings/s)")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)  # beside the data
     ax.set_title("correction throughput (one run)")
     fig.tight_layout()
     save_figure(fig, path)

@@ -239,39 +239,51 @@ def print_survey(res: dict) -> None:
 
 
 def figure_survey(res: dict, path: Path) -> None:
+    """(a) joint calibration time against transects, (b) misalignment error of the joint and the
+    single-transect calibrations per survey, (c) coverage histogram; count axes in whole numbers."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
+    from .common import integer_ticks
+
+    fig, ax = plt.subplots(1, 3, figsize=(13, 4.2))
     rows = res["scale"]
     runs = [r["runs"] for r in rows]
     ax[0].plot(runs, [r["setup_s"] for r in rows], "o-", label="set-up")
     ax[0].plot(runs, [r["solve_s"] for r in rows], "s-", label="solve")
     ax[0].plot(runs, [r["total_s"] for r in rows], "^-", label="total")
-    ax[0].set_xlabel("transects in one NLP")
-    ax[0].set_ylabel("seconds")
-    ax[0].set_title("(a) joint calibration time, 24 starts", fontsize=9)
-    ax[0].legend(fontsize=8)
+    ax[0].set_xlabel("transects in one NLP (count)")
+    ax[0].set_ylabel("wall time (s)")
+    integer_ticks(ax[0].xaxis)
+    ax[0].set_title(f"(a) joint calibration time, {res.get('starts', 24)} starts", fontsize=10)
+    ax[0].legend(fontsize=9)
+    seeds = []
     for a in res["accuracy"]:
         j = a["joint"]
-        ax[1].errorbar(a["survey_seed"], j["misalignment_error_deg"], yerr=3 * j["misalignment_se_deg"], fmt="o", color="C0")
+        seeds.append(a["survey_seed"])
+        ax[1].errorbar(a["survey_seed"], j["misalignment_error_deg"], yerr=3 * j["misalignment_se_deg"], fmt="o",
+                       color="C0", capsize=3, label="joint (all transects)" if len(seeds) == 1 else None)
         for k, s in enumerate(a["singles"]):
             ax[1].errorbar(a["survey_seed"] + 0.2 * (k + 1), s["misalignment_error_deg"], yerr=3 * s["misalignment_se_deg"],
-                           fmt="x", color="C1")
+                           fmt="x", color="C1", capsize=3, label="single transects" if len(seeds) == 1 and k == 0 else None)
     ax[1].axhline(0, color="k", lw=0.5)
-    ax[1].set_xlabel("survey seed (o joint, x single transects)")
-    ax[1].set_ylabel("misalignment error (deg), bars 3 SE")
-    ax[1].set_title("(b) joint vs single-transect misalignment", fontsize=9)
+    ax[1].set_xticks(seeds)  # a survey's seed is a name: its singles sit just right of it
+    ax[1].set_xlabel("survey seed")
+    ax[1].set_ylabel("misalignment error (deg)")
+    ax[1].set_title("(b) joint vs single-transect misalignment, bars 3 SE", fontsize=10)
+    ax[1].legend(fontsize=9)
     cov = res["coverage"]["rows"]
     z = [r["misalignment_error_deg"] / r["misalignment_se_deg"] for r in cov]
     zw = [r["misalignment_error_deg"] / r["misalignment_white_se_deg"] for r in cov]
     ax[2].hist([zw, z], bins=15, label=["white-noise SE", "reported SE (HAC)"])
     for x in (-3, 3):
         ax[2].axvline(x, color="k", lw=0.5)
-    ax[2].set_xlabel("misalignment error / SE")
-    ax[2].set_title("(c) coverage, AR(1) noise, two-transect surveys", fontsize=9)
-    ax[2].legend(fontsize=8)
+    ax[2].set_xlabel("misalignment error / SE (dimensionless)")
+    ax[2].set_ylabel("surveys (count)")
+    integer_ticks(ax[2].yaxis)
+    ax[2].set_title("(c) coverage, AR(1) noise, two-transect surveys", fontsize=10)
+    ax[2].legend(fontsize=9)
     fig.tight_layout()
     save_figure(fig, path)

@@ -40,19 +40,24 @@ def compare_formulations(case: Case, config: CalibrationConfig, formulations=FOR
     return rows
 
 
+FORMULATION_COLUMNS = (  # (key, header, unit, format)
+    ("objective", "Obj", "-", ".5g"), ("max_constraint_violation", "MaxViol", "-", ".1e"),
+    ("iterations_best", "Iter", "count", "d"), ("iterations_mean", "IterMean", "count", ".1f"),
+    ("time_s", "Time", "s", ".2f"), ("fraction_at_best", "AtBest", "fraction", ".2f"),
+    ("n_unobservable", "Unobs", "count", "d"), ("n_weak", "Weak", "count", "d"))
+TRUTH_COLUMNS = (("tangential_radial_rms_m_s", "TangRMS", "mm/s", ".3f", 1e3), ("lever_arm_rms_error_m", "LeverRMS", "mm", ".2f", 1e3))
+FORMULATION_LEGEND = ("Obj: half the noise-weighted sum of squares; MaxViol: largest constraint violation (scaled); "
+                      "Iter: iterations of the best start, IterMean: over the starts; AtBest: starts at the best; "
+                      "Unobs, Weak: lever-arm directions not, weakly determined")
+TRUTH_LEGEND = "; TangRMS: tangential radial velocity error, LeverRMS: lever-arm error, RMS against the truth"
+
+
 def format_rows(rows: dict) -> str:
-    """The comparison as a fixed-width table."""
+    """The comparison as a fixed-width table (:func:`~adcpdyn.text.text_table`), units under the headers."""
+    from ..text import Column, text_table
+
     truth = any("tangential_radial_rms_m_s" in r for r in rows.values())
-    head = (f"{'formulation':<12}{'objective':>12}{'max viol':>10}{'iter':>6}{'iter mean':>10}{'time s':>8}"
-            f"{'at best':>9}{'unobs':>7}{'weak':>6}")
+    columns = [Column(key, head, unit, spec=spec) for key, head, unit, spec in FORMULATION_COLUMNS]
     if truth:
-        head += f"{'tang rms mm/s':>15}{'lever rms mm':>14}"
-    lines = [head]
-    for form, r in rows.items():
-        line = (f"{form:<12}{r['objective']:>12.5g}{r['max_constraint_violation']:>10.1e}{r['iterations_best']:>6d}"
-                f"{r['iterations_mean']:>10.1f}{r['time_s']:>8.2f}{r['fraction_at_best']:>9.2f}"
-                f"{r['n_unobservable']:>7d}{r['n_weak']:>6d}")
-        if truth:
-            line += f"{1e3 * r['tangential_radial_rms_m_s']:>15.3f}{1e3 * r['lever_arm_rms_error_m']:>14.2f}"
-        lines.append(line)
-    return "\n".join(lines)
+        columns += [Column(key, head, unit, scale=scale, spec=spec) for key, head, unit, spec, scale in TRUTH_COLUMNS]
+    return text_table(rows, columns, first="formulation", legend=FORMULATION_LEGEND + (TRUTH_LEGEND if truth else ""))

@@ -62,28 +62,33 @@ def velocity_metrics(time_s, estimate_m_s, reference_m_s) -> dict[str, float]:
     }
 
 
-METRIC_LABELS = {
-    "mean_m_s": "Mean (m/s)",
-    "sd_m_s": "SD (m/s)",
-    "rsd_pct": "RSD (%)",
-    "mae_m_s": "MAE (m/s)",
-    "mre_pct": "MRE (%)",
-    "error_sd_m_s": "Err SD (m/s)",
-    "error_rsd_pct": "Err RSD (%)",
-    "displacement_m": "Disp (m)",
-    "distance_error_m": "Dist err (m)",
-    "distance_re_pct": "Dist RE (%)",
-    "vector_error_rms_m_s": "Vec err (m/s)",
-    "direction_error_rms_deg": "Dir err (deg)",
+# The paper's metrics as the terminal shows them, (header, unit, decimals, scale from SI): velocities
+# in mm/s (a pool boat's 8 mm/s and a ship's 5000 mm/s both legible with one decimal), distances in m
+# (up to 3 decimals, 3 significant digits: 0.390 m, 1035 m), percentages with one decimal.
+METRIC_COLUMNS = {
+    "mean_m_s": ("Mean", "mm/s", 1, 1e3),
+    "sd_m_s": ("SD", "mm/s", 1, 1e3),
+    "rsd_pct": ("RSD", "%", 1, 1.0),
+    "mae_m_s": ("MAE", "mm/s", 1, 1e3),
+    "mre_pct": ("MRE", "%", 1, 1.0),
+    "error_sd_m_s": ("ErrSD", "mm/s", 1, 1e3),
+    "error_rsd_pct": ("ErrRSD", "%", 1, 1.0),
+    "displacement_m": ("Disp", "m", 3, 1.0),  # in m: 3 decimals at most, 3 significant digits
+    "distance_error_m": ("DistErr", "m", 3, 1.0),
+    "distance_re_pct": ("DistRE", "%", 1, 1.0),
+    "vector_error_rms_m_s": ("VecErr", "mm/s", 1, 1e3),
+    "direction_error_rms_deg": ("DirErr", "deg", 1, 1.0),
 }
+METRIC_LABELS = {k: f"{head} ({unit})" for k, (head, unit, _, _) in METRIC_COLUMNS.items()}
+METRIC_LEGEND = ("Speeds horizontal. R: relative (to the mean); MAE, MRE: mean absolute, relative error; "
+                 "Err: speed error; Disp: displacement, Dist: its error; VecErr, DirErr: RMS vector, course error")
 
 
 def format_table(rows: dict[str, dict[str, float]]) -> str:
-    """A plain-text table, one row per method."""
-    keys = list(METRIC_LABELS)
-    width = max(12, max(len(k) for k in rows) + 2)
-    head = "".join(f"{'method':<{width}}") + "".join(f"{METRIC_LABELS[k]:>15}" for k in keys)
-    lines = [head]
-    for name, m in rows.items():
-        lines.append(f"{name:<{width}}" + "".join(f"{m[k]:>15.4f}" for k in keys))
-    return "\n".join(lines)
+    """A plain-text table, one row per method, at most :data:`~adcpdyn.text.TABLE_WIDTH`
+    characters wide: a unit under every header and the abbreviations in words below."""
+    from ..text import Column, text_table
+
+    columns = [Column(k, head, unit, decimals, scale, significant=3 if unit == "m" else None)
+               for k, (head, unit, decimals, scale) in METRIC_COLUMNS.items()]
+    return text_table(rows, columns, first="method", legend=METRIC_LEGEND)

@@ -218,7 +218,7 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
     x_scale : (n,) array, optional
         Typical magnitudes of x, to compare solutions position-wise when grouping.
     progress : bool, optional
-        Show a progress bar (default: when stderr is a terminal).
+        Show a progress bar (default: when stderr is a terminal, never with ``ADCPDYN_PROGRESS=0``).
     workers : int
         Threads solving starts at once. CasADi releases the GIL while it computes, so
         threads use several cores; each thread gets its own solver from ``make_solver``
@@ -231,7 +231,9 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
     """
     x0s = np.atleast_2d(np.asarray(x0s, dtype=float))
     if progress is None:
-        progress = sys.stderr.isatty()
+        from ..progress import progress_bar_enabled
+
+        progress = progress_bar_enabled()
     n = x0s.shape[0]
     workers = max(1, min(int(workers), n)) if make_solver is not None else 1
     solvers = [solver] + [make_solver() for _ in range(workers - 1)]

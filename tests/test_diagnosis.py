@@ -93,7 +93,8 @@ def test_channel_report_white_noise_and_a_sinusoid():
     wave = 0.03 * np.sin(2.0 * t) + 0.01 * rng.normal(size=t.size)
     rep = where.channel_report("roll", t, wave, 0.01, {"roll": np.sin(2.0 * t)}, [2.0])
     assert rep["score"] > 20 and abs(rep["peak_rad_s"] - 2.0) < 0.05 and rep["peak_at"].startswith("mode")
-    assert "peak at 2.00 rad/s" in rep["detail"] and "correlates with roll (r = +0.9" in rep["detail"]
+    assert "peak at 0.318 Hz (period 3.14 s) = mode 0.318 Hz" in rep["detail"]  # 2 rad/s, said in Hz
+    assert "correlates with roll (r = +0.9" in rep["detail"]
 
 
 FEW = ("attitude_latency", "sound_speed_error", "compass_deviation")

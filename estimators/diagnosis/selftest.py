@@ -177,12 +177,18 @@ def summarise(rows: list[dict], labels: list[str]) -> dict:
 def format_summary(s: dict) -> str:
     names = list(s["confusion"])
     cols = [v for v in next(iter(s["confusion"].values()))]
-    short = {v: v[:8] for v in cols}
-    w = max(len(n) for n in names) + 2
-    lines = ["confusion matrix (rows: injected, columns: verdict)",
-             " " * w + " ".join(f"{short[c]:>8s}" for c in cols)]
+    number = {v: k + 1 for k, v in enumerate(cols)}  # a verdict's number: its column, and its row when injected
+    nw = len(str(len(cols)))
+    label = {n: f"{number[n]:>{nw}d} {n}" if n in number else f"{'':>{nw}s} {n}" for n in names}
+    w = max(len(v) for v in label.values()) + 1
+    cw = max(len(str(len(cols))), max((len(str(c)) for row in s["confusion"].values() for c in row.values()), default=1)) + 2
+    lines = ["confusion matrix: cases by injected effect (rows) and verdict (columns, numbered as the rows)",
+             f"{'injected':<{w}s}" + "".join(f"{number[c]:>{cw}d}" for c in cols)]
     for t in names:
-        lines.append(f"{t:<{w}s}" + " ".join(f"{s['confusion'][t][c]:8d}" for c in cols))
+        lines.append(f"{label[t]:<{w}s}" + "".join(f"{s['confusion'][t][c]:>{cw}d}" for c in cols))
+    extra = [c for c in cols if c not in names]
+    if extra:
+        lines.append("verdicts never injected: " + ", ".join(f"{number[c]} {c}" for c in extra))
     lines += [f"cases: {s['n_cases']}  top-1 accuracy: {100 * s['top1_accuracy']:.1f}% (target >= 90%); "
               f"{100 * s['top1_accuracy_visible']:.1f}% leaving out the {s['n_invisible']} injected effects that left no "
               "significant gap (held-out excess <= min_gap or z <= gap_z: no method can name them from these data)",

@@ -21,7 +21,7 @@ LB_LAGS = 10
 
 
 def _peak(t: np.ndarray, x: np.ndarray, lo: float, hi: float):
-    """(angular frequency, fraction of the variance) of the strongest Lomb-Scargle peak."""
+    """(angular frequency in rad/s, fraction of the variance) of the strongest Lomb-Scargle peak."""
     w = np.linspace(lo, hi, 600)
     p = signal.lombscargle(t, x - x.mean(), w)
     k = int(np.argmax(p))
@@ -52,7 +52,7 @@ def channel_report(name: str, t: np.ndarray, r: np.ndarray, sigma: float, regres
     if hi > lo:
         w, frac = _peak(t, r, lo, hi)
         out["peak_rad_s"], out["peak_variance_fraction"] = w, frac
-        near = [f"{'mode' if k == 1 else f'{k}x mode'} {m:.2f} rad/s" for m in mode_freqs for k in (1, 2, 3)
+        near = [f"{'mode' if k == 1 else f'{k}x mode'} {m / (2 * np.pi):.3g} Hz" for m in mode_freqs for k in (1, 2, 3)
                 if abs(w - k * m) < 0.06 * k * m]
         out["peak_at"] = near[0] if near else None
     corr = {}
@@ -78,7 +78,9 @@ def _words(s: dict) -> str:
         parts.append(f"not white (lag-1 r = {s['lag1_autocorrelation']:.2f})")
     if s.get("peak_variance_fraction", 0.0) > 0.1:
         at = f" = {s['peak_at']}" if s.get("peak_at") else ""
-        parts.append(f"peak at {s['peak_rad_s']:.2f} rad/s{at} ({100 * s['peak_variance_fraction']:.0f}% of variance)")
+        f_hz = s["peak_rad_s"] / (2 * np.pi)  # in Hz and as a period, as the residual figure's frequency axis
+        parts.append(f"peak at {f_hz:.3g} Hz (period {1 / f_hz:.3g} s){at} ({100 * s['peak_variance_fraction']:.0f}% "
+                     "of variance)")
     strong = sorted(((abs(v), k, v) for k, v in s.get("correlation", {}).items() if abs(v) > 0.3), reverse=True)
     if strong:
         parts.append("correlates with " + ", ".join(f"{k} (r = {v:+.2f})" for _, k, v in strong[:2]))
