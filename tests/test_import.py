@@ -83,6 +83,8 @@ def test_bt_speed_agrees_with_gnss(imported, name, offset_s, tol_s):
     assert abs(prov["bt_vs_gnss_course_offset_gnss_minus_bt_deg"]) < 30.0  # a sign error would give ~180
     ref = case.reference
     assert np.all(np.diff(ref.time_s) > 0) and ref.time_s[0] > -10 and ref.time_s[-1] < case.pings.time_s[-1] + 10
+    # VTG or differenced GGA: horizontal only; the vertical is not measured (NaN), never a made-up 0
+    assert np.all(np.isnan(ref.velocity_m_s[:, 2])) and np.isfinite(ref.velocity_m_s[:, :2]).mean() > 0.9
 
 
 @needs_reader
@@ -184,7 +186,9 @@ def test_real_heading_misalignment_follows_a_turned_reference(imported):
     d0, se0 = _calibrated_misalignment(case)
     turn = np.deg2rad(40.0)
     R = np.asarray(euler_matrix(turn, 0.0, 0.0))
-    ref = dataclasses.replace(case.reference, velocity_m_s=case.reference.velocity_m_s @ R.T)
+    v = case.reference.velocity_m_s.copy()
+    v[:, :2] = v[:, :2] @ R[:2, :2].T  # the horizontal turned; the vertical (not measured, NaN) stays
+    ref = dataclasses.replace(case.reference, velocity_m_s=v)
     d1, se1 = _calibrated_misalignment(case.replace(reference=ref))
     assert abs((d1 - d0) - turn) < 3 * np.hypot(se0, se1)
 

@@ -276,7 +276,7 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
     t_ref = track.time_utc_s - offset - t_abs[0]
     inside = (t_ref >= case.pings.time_s[0] - REFERENCE_MARGIN_S) & (t_ref <= case.pings.time_s[-1] + REFERENCE_MARGIN_S)
     vel = track.velocity_ned_m_s[inside].copy()
-    vel[:, 2] = 0.0
+    vel[:, 2] = np.nan  # not measured: a velocity from VTG or differenced GGA has no usable vertical
     if inside.sum() < gnss.MIN_FIXES:
         attrs["/provenance"]["gnss"] = f"none: {int(inside.sum())} GNSS velocities inside the selected pings"
         return case, attrs
@@ -295,7 +295,7 @@ def _with_reference(case: Case, attrs: dict, ds, path, t_abs) -> tuple[Case, dic
     })
     attrs["/reference"] = {
         "source": "GNSS over ground, Earth frame (N, E, D), time on the ADCP clock (GNSS UTC - clock_offset_s)",
-        "vertical_velocity": "0 (surface vessel; GNSS vertical not used)",
+        "vertical_velocity": "NaN: not measured (VTG and differenced GGA carry no usable vertical velocity)",
         "point_body_source": "antenna position not in the file: zeros (taken at G)",
         "window": ("window_s: the interval between the two GGA fixes each velocity is differenced from (the velocity is "
                    "the mean over it, stamped at its middle)" if averaged else
