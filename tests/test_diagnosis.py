@@ -8,11 +8,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import refit_without
+from conftest import REAL, refit_without
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.diagnosis import where
 from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, _cv_residuals, _folds, diagnose
+from adcpdyn.estimators.calibration.record import as_record
 from adcpdyn.estimators.diagnosis.selftest import oracle_shrink, with_effect
 from adcpdyn.models.effects import CATALOG, get_effect
 from adcpdyn.cases.simulation import simulate
@@ -311,3 +312,23 @@ def test_a_channel_sampled_at_the_folds_period_is_spread_over_the_folds():
     fold = _folds(model, 5, 2.0)
     assert set(fold[pings.size:]) == {0, 1, 2, 3, 4}
     assert np.array_equal(fold, _folds(model, 5, 2.0))  # the same every call
+
+
+@pytest.mark.skipif(not (REAL / "winriver02_transect.PD0").is_file(), reason="real file absent")
+def test_reference_latency_found_on_a_real_transect():
+    """winriver02 (GNSS velocities a ping apart, not on the pings), calibrated on itself: its clean
+    run names no reference latency; the same run with its GNSS stamped 2 s late names it, within 3
+    SE (the profile's) of 2 s."""
+    from adcpdyn import api
+    from adcpdyn.estimators.diagnosis.field_errors import inject
+
+    case = api.import_file(REAL / "winriver02_transect.PD0").case
+    calibration = api.calibrate(case, n_starts=4)
+    config = DiagnosisConfig(effects=("reference_latency", "moving_bed"), navigation="random_walk")
+    clean = diagnose(case, config, calibration=as_record(calibration))
+    assert "reference_latency" not in clean.verdict
+    late = diagnose(inject(case, "reference_latency_s", 2.0), config, calibration=as_record(calibration))
+    assert late.verdict.split("+")[0] == "reference_latency"
+    top = next(s for s in late.ranking if s["effect"] == "reference_latency")
+    est, se = top["params"]["reference_latency.delay_s"], top["params_se"]["reference_latency.delay_s"]
+    assert 0 < se < 0.2 and abs(est - 2.0) < 3 * se

@@ -482,10 +482,6 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
         return False, "part of the base: a constant heading error turns the beams as the installation yaw it estimates"
     if name == "compass_offset" and base.spec.heading != "off" and "heading_misalignment" not in base.pins.values:
         return False, "part of the base: the heading misalignment it estimates against the reference is a constant heading error"
-    if name == "reference_latency" and any(r.random_walk for r in base.runs):
-        return False, ("needs a smooth navigation (--navigation knots): with a velocity at every ping its estimate "
-                       "follows the joint fit, which prefers reference samples on the pings' knots (measured on "
-                       "winriver02: 0.38 s on the clean file, where the marginal likelihood prefers 0)")
     if name == "deep_water_timing" and base.runs[0].timing != "shallow":
         return False, "part of the base: the calibration's two-way timing"
     return True, ""
@@ -558,8 +554,10 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
     mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
     idx = [model.names.index(n) for n in mine]
     values = {n: float(fit.x[i]) for n, i in zip(mine, idx)}
-    se = dict(zip(mine, _standard_errors(fit, model, idx)))
     colour = _colour_factor(model, fit, ref_model, ref_fit, noise)
+    # a profile's curvature counts white residuals: its SE widened by the same colour factor as the BIC
+    se = {**dict(zip(mine, _standard_errors(fit, model, idx))),
+          **{n: v * np.sqrt(colour) for n, v in fit.profile_se.items() if n in mine}}
     return EffectScore(
         colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
@@ -682,8 +680,10 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
 
     def refit(selected_terms, name, start_fit):
         terms = selected_terms + _terms(base, name)
-        model = GapModel(base, terms, peaks, solver=config.solver)
         values = dict(zip(start_fit.names, start_fit.x))
+        if base_model.random_walk and any(t.effect.name == "reference_latency" for t in terms):
+            return _delay_profile(base, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
+        model = GapModel(base, terms, peaks, solver=config.solver)
         pinned = _pinned_effect_parameters(model, base)
         extra = [o for t in _terms(base, name) for o in t.effect.extra_starts()]
         starts = [model.start(values)] + [model.start(values, _renamed(model, o)) for o in extra]
@@ -707,14 +707,17 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             selected_terms += _terms(base, name)
         if current[0].random_walk:  # the noise levels of the model the candidates are judged against: its own
             gm, gf = current
-            gf, noise = _noise_from_data(gm, gf, fixed=_pinned_effect_parameters(gm, base))
+            held = {n: float(gf.x[gm.names.index(n)]) for n in gm.names if n.endswith(REFERENCE_DELAY)}  # at its profile's best
+            profile_se = gf.profile_se
+            gf, noise = _noise_from_data(gm, gf, fixed={**_pinned_effect_parameters(gm, base), **held})
+            gf.profile_se = profile_se
             current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
         fits[current_name] = current
         cv[current_name] = _cv_residuals(*current, config.cv_folds, config.cv_block_s)
         gm, gf = current
         idx = [gm.names.index(n) for n in gm.effect_names]
-        given = {n: {"value": float(gf.x[i]), "se": float(e)}
+        given = {n: {"value": float(gf.x[i]), "se": float(gf.profile_se.get(n, e))}
                  for n, i, e in zip(gm.effect_names, idx, _standard_errors(gf, gm, idx))}
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
     walk = base_model.random_walk  # a velocity per ping: coloured-residual BIC, smaller shrink share
@@ -909,6 +912,62 @@ def _fixed_points(base, terms, peaks, config, model, fit, pinned):
         fit = new
         if moved < 1e-3:
             break
+    return model, fit
+
+
+REFERENCE_DELAY_SPAN_S = 3.0  # the reference delays a random-walk base's profile searches, +- (s)
+REFERENCE_DELAY = "reference_latency.delay_s"
+
+
+def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile: bool):
+    """A reference delay on a velocity per ping, by the likelihood marginal over the velocities: each
+    model is exact at its delay (the reference rows taken at t - d, the delay pinned there), since the
+    joint fit the NLP minimises prefers the reference samples on the pings' knots (0.38 s on clean
+    winriver02, where the marginal is highest at 0). With ``profile``: a grid of one ping interval
+    over +- :data:`REFERENCE_DELAY_SPAN_S`, then half and a quarter of one about the best, then the
+    vertex of a parabola through the points within two intervals of it, whose curvature gives the
+    standard error (``Fit.profile_se``; NaN at the span's edge or where the parabola does not curve
+    down). The marginal profile keeps a ripple at the ping interval where the reference samples sit
+    on the pings (RiverPro: +-30 in log-likelihood; a piecewise-linear path has no bridge variance
+    between its knots): the estimate is then drawn to the delays that keep them there. Without: held where ``values`` (the chosen
+    model's) put it."""
+
+    def at(d: float, x: dict):
+        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, reference_shift_s=d) for r in base.runs])
+        model = GapModel(shifted, terms, peaks, solver=config.solver)
+        name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
+        pinned = {**_pinned_effect_parameters(model, shifted), name: d}
+        fit = model.solve(model.start(x), sigma, fixed=pinned)
+        return _fixed_points(shifted, terms, peaks, config, model, fit, pinned) if not profile else (model, fit)
+
+    if not profile:
+        return at(next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY)), values)
+    step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
+    tried, x = {}, values
+    for d in np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist() + \
+            (-np.arange(step, REFERENCE_DELAY_SPAN_S + 1e-9, step)).tolist():
+        tried[d] = at(d, x if d != -step else values)
+        x = dict(zip(tried[d][1].names, tried[d][1].x))
+    ll = lambda d: tried[d][1].log_likelihood(tried[d][0])
+    for h in (step / 2, step / 4):
+        best = max(tried, key=ll)
+        for d in (best - h, best + h):
+            if abs(d) <= REFERENCE_DELAY_SPAN_S + 1e-9 and d not in tried:
+                tried[d] = at(d, dict(zip(tried[best][1].names, tried[best][1].x)))
+    best = max(tried, key=ll)
+    near = sorted(d for d in tried if abs(d - best) <= 2 * step + 1e-9)  # two intervals: past the ping-scale ripple
+    curvature, slope, _ = np.polyfit(np.array(near) - best, [ll(d) for d in near], 2) if len(near) >= 3 else (0.0, 0.0, 0.0)
+    if curvature < 0:  # the parabola's vertex, within the last refinement's reach
+        vertex = best + float(np.clip(-slope / (2 * curvature), -step / 4, step / 4))
+        if vertex not in tried and abs(vertex) <= REFERENCE_DELAY_SPAN_S:
+            tried[vertex] = at(vertex, dict(zip(tried[best][1].names, tried[best][1].x)))
+            best = max(tried, key=ll)
+    edge = best in (min(tried), max(tried))  # the profile may rise beyond the span
+    model, fit = tried[best]
+    name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
+    pinned = {**_pinned_effect_parameters(model, model.base), name: best}
+    model, fit = _fixed_points(model.base, terms, peaks, config, model, fit, pinned)  # the attitude's delays, if any
+    fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
     return model, fit
 
 

@@ -83,6 +83,7 @@ class Fit:
     jacobian: object  # scipy sparse: of the weighted residuals w.r.t. the scaled unknowns
     scale: np.ndarray
     free: np.ndarray | None = None  # unknowns neither pinned nor held by an active bound
+    profile_se: dict = field(default_factory=dict)  # SEs of unknowns pinned at a likelihood profile's maximum
 
     def group_rss(self, model: "GapModel") -> dict:
         out = {}
