@@ -332,3 +332,21 @@ def test_reference_latency_found_on_a_real_transect():
     top = next(s for s in late.ranking if s["effect"] == "reference_latency")
     est, se = top["params"]["reference_latency.delay_s"], top["params_se"]["reference_latency.delay_s"]
     assert 0 < se < 0.2 and abs(est - 2.0) < 3 * se
+
+
+def test_reference_delay_profile_holds_the_delay_and_reports_its_curvature():
+    """On a random-walk base the reference delay is pinned at its profile's best (never left free to
+    the joint fit), inside the searched span, with a positive standard error from the profile; the
+    clean simulated run does not name it."""
+    from adcpdyn.estimators.diagnosis.diagnose import REFERENCE_DELAY_SPAN_S
+
+    case = simulate(short_scenario(30.0), seed=3)
+    r = diagnose(case, DiagnosisConfig(effects=("reference_latency",), navigation="random_walk"))
+    s = next(s for s in r.ranking if s["effect"] == "reference_latency")
+    delay, se = s["params"]["reference_latency.delay_s"], s["params_se"]["reference_latency.delay_s"]
+    assert abs(delay) <= REFERENCE_DELAY_SPAN_S and 0 < se < 1.0
+    model, fit = r.fits["reference_latency"]
+    i = model.names.index("reference_latency.delay_s")
+    assert not fit.free[i] and fit.x[i] == delay
+    assert model.base.runs[0].reference_shift_s == pytest.approx(delay)  # the model is exact at it
+    assert r.verdict == "none"
