@@ -929,8 +929,8 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
     standard error (``Fit.profile_se``; NaN at the span's edge or where the parabola does not curve
     down). The marginal profile keeps a ripple at the ping interval where the reference samples sit
     on the pings (RiverPro: +-30 in log-likelihood; a piecewise-linear path has no bridge variance
-    between its knots): the estimate is then drawn to the delays that keep them there. Without: held where ``values`` (the chosen
-    model's) put it."""
+    between its knots): the estimate is then drawn to the delays that keep them there. Without
+    ``profile``: held where ``values`` (the chosen model's) put it."""
 
     def at(d: float, x: dict):
         shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, reference_shift_s=d) for r in base.runs])
@@ -943,12 +943,16 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
     if not profile:
         return at(next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY)), values)
     step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
-    tried, x = {}, values
+    tried, marginal, x = {}, {}, values
     for d in np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist() + \
             (-np.arange(step, REFERENCE_DELAY_SPAN_S + 1e-9, step)).tolist():
-        tried[d] = at(d, x if d != -step else values)
+        tried[d] = at(d, x if d != -step else values)  # each side warm-started from its neighbour
         x = dict(zip(tried[d][1].names, tried[d][1].x))
-    ll = lambda d: tried[d][1].log_likelihood(tried[d][0])
+
+    def ll(d: float) -> float:
+        if d not in marginal:
+            marginal[d] = tried[d][1].log_likelihood(tried[d][0])
+        return marginal[d]
     for h in (step / 2, step / 4):
         best = max(tried, key=ll)
         for d in (best - h, best + h):
