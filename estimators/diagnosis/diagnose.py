@@ -903,6 +903,8 @@ def _fixed_points(base, terms, peaks, config, model, fit, pinned):
     reference latency. Without such an effect the fit is returned as it is."""
     points = {**(SAMPLE_FIXED_POINTS if base.sampled else {}), **REFERENCE_FIXED_POINTS}
     names = {field: n for key, field in points.items() for n in model.names if n.endswith(key)}
+    if all(n in pinned for n in names.values()):  # a delay held (a profile's) is where its model is exact already
+        return model, fit
     for _ in range(LATENCY_ITERATIONS if names else 0):
         values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
         shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])
