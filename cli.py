@@ -873,7 +873,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results", help="folder of the results")
     s.add_argument("--readme", metavar="FILE", help="solvers suite: put its tables between FILE's solver-table markers "
-                                                    "(README.md)")
+                                                    "(docs/benchmarks.md)")
 
     s = command("demo", "the main job on the built-in default case", cmd_demo)
     s.add_argument("--scenario", nargs="+", default=list(DEFAULT_CASES), help="measurement runs to correct")

@@ -76,7 +76,7 @@ def _summary(rows: list) -> dict:
 
 
 def markdown_table(res: dict) -> str:
-    """The README's table: per error and size, each file's and base's first verdict (bold when the
+    """The table of docs/diagnosis.md: per error and size, each file's and base's first verdict (bold when the
     injected error's effect is named first), from the rows as measured."""
     cols = list(dict.fromkeys((r["file"], r["navigation"]) for r in res["rows"]))
     trials = list(dict.fromkeys((r["error"], r["size"]) for r in res["rows"]))

@@ -6,7 +6,7 @@ attitude pre-fit; rows give the set-up time (building the NLP and the solver), t
 multistart's wall time, the objective reached (relative to the default's), the share of
 starts at the best and the mean iterations. Times are ratios to the default measured
 in the same run. The tables are also written as markdown (``solvers.md``), which
-``--readme`` puts between the README's solver-table markers.
+``--readme`` puts between the solver-table markers of a page (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from .common import Target, json_from_child, machine, print_targets, save_figure
 from .solver_comparison import CASES, bench_solver_comparison, comparison_lines
 from ..solvers.multistart import SolverOptions
 
-README_BEGIN = "<!-- solver-table: begin (written by adcpdyn bench solvers --readme README.md) -->"
+README_BEGIN = "<!-- solver-table: begin (written by adcpdyn bench solvers --readme docs/benchmarks.md) -->"
 README_END = "<!-- solver-table: end -->"
 
 

@@ -178,7 +178,7 @@ def test_diagnosis_on_the_sensor_samples_finds_a_beam_side_effect():
     that exists only on a motion model (an extra mode) is skipped with the reason. The samples are
     an IMU's (0.02 deg tilt, 0.05 deg heading noise at 5 Hz): rates differenced from a compass-grade
     sensor's samples miss the tangential velocity by more than the bottom-track noise, a gap of
-    their own (the README's limits)."""
+    their own (docs/diagnosis.md's limits)."""
     sc = short_scenario(40.0)
     imu = dataclasses.replace(sc.run.noise, tilt_rad=float(np.deg2rad(0.02)), heading_rad=float(np.deg2rad(0.05)))
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, noise=imu))

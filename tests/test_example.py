@@ -1,4 +1,4 @@
-"""The notebook-style example of the README runs on a real file: import, calibrate, correct, export, open."""
+"""The notebook-style example of docs/api.md and docs/netcdf.md runs on a real file: import, calibrate, correct, export, open."""
 
 from __future__ import annotations
 
