@@ -45,8 +45,8 @@ from ..hac import andrews_lags, newey_west
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  knot_times, ping_knots)
 from . import where as where_mod
-from .model import PRIOR_GROUPS, VELOCITY_NAME, DiagnosisBase, Fit, GapModel, Pins, residual_peaks
-from .normal_equations import as_sparse, leave_out_predictions, marginal_covariance, redundancy
+from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
+from .normal_equations import leave_out_predictions, marginal_covariance, redundancy
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "vertical")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
@@ -227,30 +227,13 @@ def _cv_residuals(model, fit, folds: int, block_s: float, fold_of: np.ndarray | 
     unit chi-square whatever its number of unknowns (navigation knots, angles), so the gap
     measures misfit, not the model's flexibility.
     """
-    J, cols = _free_jacobian(fit)  # a pinned unknown or one at its bound stays put
+    J, cols = free_jacobian(fit)  # a pinned unknown or one at its bound stays put
     w = model.weights(fit.sigma)
     e = w * fit.raw
     fold_of = _folds(model, folds, block_s) if fold_of is None else fold_of
-    pred = leave_out_predictions(J, e, model.mask > 0, fold_of, local=_velocity_columns(model, cols))
+    pred = leave_out_predictions(J, e, model.mask > 0, fold_of, local=velocity_columns(model, cols))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
-
-
-def _free_jacobian(fit) -> tuple:
-    """The fit's weighted-residual Jacobian (scipy sparse) on its free unknowns, and their columns."""
-    J = as_sparse(fit.jacobian)
-    free = getattr(fit, "free", None)
-    cols = np.flatnonzero(free) if free is not None else np.arange(J.shape[1])
-    return J[:, cols], cols
-
-
-def _velocity_columns(model, cols) -> np.ndarray | None:
-    """Which of the unknowns ``cols`` are navigation velocities (V<j>_<axis>, per run): each row
-    touches a few neighbouring ones, so their block of the normal matrix is banded."""
-    names = getattr(model, "names", None)
-    if names is None:
-        return None
-    return np.array([VELOCITY_NAME.fullmatch(names[c].split("/")[-1]) is not None for c in cols], dtype=bool)
 
 
 def _gap_rows(model) -> np.ndarray:
@@ -290,7 +273,7 @@ def _covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
     """Covariance of the scaled unknowns ``index`` (a pinned one or one at its bound: zero),
     scaled by the fit's chi-square."""
     index = np.asarray(index, dtype=int)
-    J, cols = _free_jacobian(fit)
+    J, cols = free_jacobian(fit)
     dof = max(int((model.mask > 0).sum()) - cols.size, 1)
     s2 = 2.0 * fit.objective / dof
     position = {c: j for j, c in enumerate(cols)}
@@ -444,9 +427,9 @@ def variance_components(model: GapModel, fit: Fit) -> dict:
     """Each (run, group)'s noise level from the fit's residuals over their redundancy (Helmert /
     Foerstner variance-component estimation: sigma_g^2 = e_g^T e_g / (n_g - sum of the group's
     leverages)); the random walk's intensity is one of them (REML for a linear-Gaussian walk)."""
-    J, cols = _free_jacobian(fit)
+    J, cols = free_jacobian(fit)
     used = model.mask > 0
-    r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=_velocity_columns(model, cols))
+    r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=velocity_columns(model, cols))
     out = dict(fit.sigma)
     for i, key in enumerate(model.sigma_keys):
         m = (model.row_sigma == i) & used
@@ -934,16 +917,21 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
     between its knots): the estimate is then drawn to the delays that keep them there. Without
     ``profile``: held where ``values`` (the chosen model's) put it."""
 
+    def held(model: GapModel, d: float) -> dict:
+        return {**_pinned_effect_parameters(model, model.base),
+                next(n for n in model.names if n.endswith(REFERENCE_DELAY)): d}
+
     def at(d: float, x: dict):
         shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, reference_shift_s=d) for r in base.runs])
         model = GapModel(shifted, terms, peaks, solver=config.solver)
-        name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
-        pinned = {**_pinned_effect_parameters(model, shifted), name: d}
-        fit = model.solve(model.start(x), sigma, fixed=pinned)
-        return _fixed_points(shifted, terms, peaks, config, model, fit, pinned) if not profile else (model, fit)
+        return model, model.solve(model.start(x), sigma, fixed=held(model, d))
+
+    def settled(model: GapModel, fit: Fit, d: float):  # the attitude's delays, if any, to their fixed point
+        return _fixed_points(model.base, terms, peaks, config, model, fit, held(model, d))
 
     if not profile:
-        return at(next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY)), values)
+        d = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY))
+        return settled(*at(d, values), d)
     step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
     tried, marginal, x = {}, {}, values
     for d in np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist() + \
@@ -969,10 +957,8 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
             tried[vertex] = at(vertex, dict(zip(tried[best][1].names, tried[best][1].x)))
             best = max(tried, key=ll)
     edge = best in (min(tried), max(tried))  # the profile may rise beyond the span
-    model, fit = tried[best]
+    model, fit = settled(*tried[best], best)
     name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
-    pinned = {**_pinned_effect_parameters(model, model.base), name: best}
-    model, fit = _fixed_points(model.base, terms, peaks, config, model, fit, pinned)  # the attitude's delays, if any
     fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
     return model, fit
 

@@ -67,6 +67,23 @@ class DiagnosisBase:
         return any(r.attitude_source == "samples" for r in self.runs)
 
 
+def free_jacobian(fit) -> tuple:
+    """The fit's weighted-residual Jacobian (scipy sparse) on its free unknowns, and their columns."""
+    J = as_sparse(fit.jacobian)
+    free = getattr(fit, "free", None)
+    cols = np.flatnonzero(free) if free is not None else np.arange(J.shape[1])
+    return J[:, cols], cols
+
+
+def velocity_columns(model, cols) -> np.ndarray | None:
+    """Which of the unknowns ``cols`` are navigation velocities (V<j>_<axis>, per run): each row
+    touches a few neighbouring ones, so their block of the normal matrix is banded."""
+    names = getattr(model, "names", None)
+    if names is None:
+        return None
+    return np.array([VELOCITY_NAME.fullmatch(names[c].split("/")[-1]) is not None for c in cols], dtype=bool)
+
+
 @dataclass
 class Fit:
     """One solved model: estimates, residuals per channel and the solver's account."""
@@ -110,11 +127,9 @@ class Fit:
     def latent_log_det(self, model: "GapModel", levels: dict) -> float:
         """log det of the per-ping velocities' information J_V^T W J_V, the rows weighted by the noise
         ``levels`` ((run, group) -> sigma) instead of the fit's own."""
-        J = as_sparse(self.jacobian)
-        cols = np.flatnonzero(self.free) if self.free is not None else np.arange(J.shape[1])
-        latent = cols[[VELOCITY_NAME.fullmatch(model.names[c].split("/")[-1]) is not None for c in cols]]
+        J, cols = free_jacobian(self)
         ratio = np.array([self.sigma[k] / levels.get(k, self.sigma[k]) for k in model.sigma_keys])[model.row_sigma]
-        return log_det_normal(sp.diags(np.where(model.mask > 0, ratio, 0.0)) @ J[:, latent])
+        return log_det_normal(sp.diags(np.where(model.mask > 0, ratio, 0.0)) @ J[:, velocity_columns(model, cols)])
 
     def effect_values(self, model: "GapModel") -> dict:
         return {n: float(self.x[i]) for n, i in zip(model.effect_names, model.effect_index)}
