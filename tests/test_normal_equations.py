@@ -363,3 +363,26 @@ def test_an_error_nested_in_the_files_own_effect_is_judged_on_that_effect():
     assert carrier("attitude_latency", ["attitude_latency"]) == "attitude_latency"
     assert carrier("compass_deviation", ["compass_offset"]) is None  # the smaller cannot carry the larger
     assert carrier("moving_bed", []) is None
+
+
+def test_detection_limit_is_the_size_the_selection_takes():
+    """The clean run's detection limit (HAC standard error times sqrt(k log n + margin)) splits the
+    sizes the diagnosis names from those it cannot: three times it is named, a third of it is not."""
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, diagnose
+    from adcpdyn.estimators.diagnosis.field_errors import detection_limit, inject
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=40.0)), seed=5)
+    config = DiagnosisConfig(effects=("sound_speed_error", "moving_bed"), navigation="random_walk")
+    clean = diagnose(case, config)
+    score = next(s for s in clean.ranking if s["effect"] == "sound_speed_error")
+    limit = detection_limit("sound_speed_relative", score["detection_limit"])
+    se = score["params_se"]["sound_speed_error.relative_error"]
+    assert clean.verdict == "none" and limit == pytest.approx(se * np.sqrt(np.log(clean.base["n_observations"]) + 10.0))
+    assert diagnose(inject(case, "sound_speed_relative", 3 * limit), config).verdict == "sound_speed_error"
+    assert diagnose(inject(case, "sound_speed_relative", limit / 3), config).verdict == "none"
+    assert detection_limit("compass_offset_deg", {"compass_offset.A_rad": 0.01}) == pytest.approx(np.degrees(0.01))
+    assert detection_limit("moving_bed_m_s", {"moving_bed.velocity_north_m_s": 0.02, "moving_bed.velocity_east_m_s": 0.05}) == 0.05
+    assert detection_limit("heave_m_s", {"heave.cos_m": 0.01}) is None  # frequency-dependent: not claimed

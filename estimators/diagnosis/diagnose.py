@@ -41,12 +41,12 @@ from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration.problem import ATTITUDES, choose_attitude
 from ..calibration.record import CalibrationRecord
-from ..hac import andrews_lags, newey_west
+from ..hac import andrews_lags, newey_west, sandwich
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  knot_times, ping_knots)
 from . import where as where_mod
 from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
-from .normal_equations import leave_out_predictions, marginal_covariance, redundancy
+from .normal_equations import as_sparse, inverse_columns, leave_out_predictions, marginal_covariance, redundancy
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "vertical")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
@@ -133,6 +133,7 @@ class EffectScore:
     confounded_share: float = 0.0
     round: int = 1
     at_bound: list = field(default_factory=list)  # unknowns stopped at a bound of their range: not determined there
+    detection_limit: dict = field(default_factory=dict)  # per unknown: the smallest size this file's selection takes
     heldout_z: float = float("nan")  # held-out gap change over its HAC standard error (random-walk base): reported,
     # not a gate (as an alternative to the shrink it named winriver02's clean reference lever arm at z 3.2)
 
@@ -288,6 +289,38 @@ def _covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
 def _standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
     """Standard errors of the unknowns ``index`` in their own units (:func:`_covariance`'s diagonal)."""
     return np.sqrt(np.maximum(np.diag(_covariance(fit, model, index)), 0)) * fit.scale[index]
+
+
+def _hac_standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
+    """Standard errors of the unknowns ``index`` (own units) under coloured residuals: the
+    Newey-West sandwich (:func:`..hac.sandwich`) over time bins of a ping interval, the priors'
+    rows counted by their expected information. An unknown held at a bound is freed for it: its
+    SE is then what the data would give it near there (a detection limit's scale)."""
+    index = np.asarray(index, dtype=int)
+    if index.size == 0:
+        return np.zeros(0)
+    J = as_sparse(fit.jacobian)
+    free = np.ones(J.shape[1], dtype=bool) if fit.free is None else fit.free.astype(bool).copy()
+    free[index] = True
+    cols = np.flatnonzero(free)
+    Jc = J[:, cols]
+    P_q = inverse_columns(Jc, np.searchsorted(cols, index))
+    used = model.mask > 0
+    e = np.where(used, model.weights(fit.sigma) * fit.raw, 0.0)
+    prior = np.isin(model.row_sigma, [i for i, k in enumerate(model.sigma_keys) if k[1] in PRIOR_GROUPS])
+    bins = {k: float(np.median(np.diff(r.case.pings.time_s))) for k, r in enumerate(model.base.runs)}
+    rows = used | prior
+    H = sandwich(Jc[np.flatnonzero(rows)], e[rows], P_q, model.row_run[rows], model.times[rows], bins,
+                 known=prior[rows])
+    return np.sqrt(np.maximum(np.diag(H.cov), 0.0)) * fit.scale[index]
+
+
+def detection_limits(names: list, se_hac: np.ndarray, n_params: int, n_obs: int, bic_margin: float) -> dict:
+    """Smallest size of each unknown the selection would take: an effect joins when
+    z^2 > k log n + margin under coloured residuals (its coloured BIC gain beyond the margin), so
+    the limit is its HAC standard error times sqrt(k log n + margin)."""
+    factor = np.sqrt(n_params * np.log(n_obs) + bic_margin)
+    return {n: float(s * factor) for n, s in zip(names, se_hac)}
 
 
 def _velocity_error(model: GapModel, fit: Fit) -> float | None:
@@ -539,15 +572,21 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
     values = {n: float(fit.x[i]) for n, i in zip(mine, idx)}
     colour = _colour_factor(model, fit, ref_model, ref_fit, noise)
     # a profile's curvature counts white residuals: its SE widened by the same colour factor as the BIC
-    se = {**dict(zip(mine, _standard_errors(fit, model, idx))),
+    white = _standard_errors(fit, model, idx)
+    hac = _hac_standard_errors(fit, model, idx)
+    limits = detection_limits(mine, np.maximum(hac, white), k, n_obs, config.bic_margin)
+    # a free unknown's SE under coloured residuals (never below the white one, as the colour factor is at least 1)
+    se = {**{n: float(max(h, w)) if w > 0 else 0.0 for n, h, w in zip(mine, hac, white)},
           **{n: v * np.sqrt(colour) for n, v in fit.profile_se.items() if n in mine}}
+    limits.update({n: float(v * np.sqrt(colour) * np.sqrt(k * np.log(n_obs) + config.bic_margin))
+                   for n, v in fit.profile_se.items() if n in mine and np.isfinite(v)})
     return EffectScore(
         colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
         # an effect without unknowns is not nested in the model it replaces: no likelihood-ratio test, the BIC compares
         p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else float("nan"),
         at_bound=at_bounds(name, values), n_params=k, params=values,
-        params_se={n: float(e) for n, e in se.items()}, gap_after=float(gap_after),
+        params_se={n: float(e) for n, e in se.items()}, detection_limit=limits, gap_after=float(gap_after),
         shrink_fraction=float(shrink), velocity_error_m_s=_velocity_error(model, fit), success=fit.success,
         status=fit.status, iterations=fit.iterations, round=round_,
         heldout_z=heldout_improvement_z(model, cv, ref_model, ref_cv, noise))

@@ -27,6 +27,25 @@ SHIFTED_PARAMETER = {  # error -> (the effect's unknown it moves, the sign of th
     "sound_speed_relative": ("relative_error", -1.0), "tilt_lowpass_s": ("tau_s", 1.0),
 }
 HEAVE_OMEGA_RAD_S = 1.0  # the injected heave's frequency (a 6.3-s swell)
+LIMIT_PARAMETERS = {  # error -> (the effect's unknowns whose detection limit bounds it, factor to the error's unit)
+    "compass_offset_deg": (("A_rad",), float(np.degrees(1.0))), "attitude_latency_s": (("delay_s",), 1.0),
+    "reference_latency_s": (("delay_s",), 1.0), "sound_speed_relative": (("relative_error",), 1.0),
+    "tilt_lowpass_s": (("tau_s",), 1.0),
+    # the bed is injected across the mean course, in an unknown mix of north and east: the harder of the two
+    "moving_bed_m_s": (("velocity_north_m_s", "velocity_east_m_s"), 1.0),
+    # heave has none: its limit depends on the frequency, and the clean fit's is not the injected one
+}
+
+
+def detection_limit(error: str, limits: dict) -> float | None:
+    """The smallest size of ``error`` (its own unit) the diagnosis takes on a file, from its catalog
+    effect's per-unknown detection limits (full names -> value, :func:`.diagnose.detection_limits`);
+    None where they are missing."""
+    if error not in LIMIT_PARAMETERS:
+        return None
+    names, factor = LIMIT_PARAMETERS[error]
+    found = [v for k, v in limits.items() if k.rsplit(".", 1)[-1] in names and np.isfinite(v)]
+    return float(max(found) * factor) if found else None
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 
 

@@ -15,7 +15,7 @@ from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
 from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, diagnose
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, has_moving_reference, inject
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, detection_limit, has_moving_reference, inject
 
 
 def field_selftest(case: Case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
@@ -32,7 +32,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
     moving = has_moving_reference(case)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
-    rows, own, own_values = [], (), {}
+    rows, own, own_values, limits = [], (), {}, {}
     for error, size in trials:
         run = case if error == "clean" else inject(case, error, size)
         tic = time.perf_counter()
@@ -45,8 +45,14 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
                "shrink": mine["shrink_fraction"] if mine else None, "estimate": mine["params"] if mine else None,
                "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
                "seconds": time.perf_counter() - tic, "statement": r.statement}
+        row["detection_limit"] = limits.get(error)
         row["outcome"] = outcome(row, mine, r, config.min_gap)
         if error == "clean":
+            # the file's detection limits, before anything is injected: what each error's effect would need
+            first = {sc["effect"]: sc for sc in r.ranking if sc["round"] == 1}
+            limits = {e: detection_limit(e, first[spec[0]]["detection_limit"]) if spec[0] in first else None
+                      for e, spec in FIELD_ERRORS.items()}
+            row["detection_limits"] = limits
             own = tuple(r.selected)
             own_values = {name: next(s for s in r.ranking if s["effect"] == name and s["significant"]) for name in own}
             row["own_effects"] = list(own)
@@ -70,8 +76,9 @@ def carrier(effect: str, own) -> str | None:
 def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     """Why an injected error was or was not named, in words: named; not tried (why); no gap to
     explain (the held-out excess of the model the candidates are judged against is under
-    ``min_gap``: nothing can be significant, whatever was injected); below detection (its own
-    effect fitted alone is not significant: the size is under what this file shows); or outscored
+    ``min_gap``: nothing can be significant, whatever was injected); under the file's detection
+    limit (the clean run's, :func:`.field_errors.detection_limit`); below detection (its own effect
+    fitted alone is not significant, though the size is above the limit); or outscored
     (it is significant, another effect was preferred: the two are hard to tell apart here)."""
     if row["expected"] == "none":
         return "clean" if row["verdict"] == "none" else f"names {row['verdict']}"
@@ -83,6 +90,10 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     detail = f"BIC gain {mine['delta_bic_hac'] if result.base.get('navigation') == 'random_walk' else mine['delta_bic']:.0f}, " \
              f"shrink {100 * mine['shrink_fraction']:.0f} %" \
              + (f", held-out z {mine['heldout_z']:.1f}" if np.isfinite(mine.get("heldout_z", np.nan)) else "")
+    limit = row.get("detection_limit")
+    if not mine["significant"] and limit is not None and row["size"] < limit:
+        unit = f" {row['unit']}" if row["unit"] else ""
+        return f"under the file's detection limit ({row['size']:g} < {limit:.3g}{unit}; {detail})"
     if not mine["significant"] and result.gap_before <= min_gap:
         return f"no gap to explain (held-out excess {result.gap_before:.2f}; {detail})"
     if not mine["significant"]:
@@ -114,16 +125,18 @@ def summarise(rows: list) -> dict:
             per.setdefault(r["error"], []).append(r)
     clean = [r for r in rows if r["error"] == "clean"]
     injected = [r for r in rows if r["error"] != "clean"]
-    detectable = [r for r in injected if not r.get("outcome", "").startswith(("below detection", "not tried", "no gap"))]
+    # detectable: at or above the file's detection limit, computed on the clean run before any injection
+    detectable = [r for r in injected if r.get("detection_limit") is not None and r["size"] >= r["detection_limit"]]
     return {
         "top1": float(np.mean([r["hit"] for r in injected])) if injected else None,
-        # top-1 among the errors this file can show at all (their own effect significant when fitted alone):
-        # what is left is the choice among effects, the rest is the file's detection limit
+        # top-1 among the injections at or above the file's detection limit (from the clean run's information
+        # and residual colour): what is left is the choice among effects, the rest is the file's limit
         "top1_detectable": float(np.mean([r["hit"] for r in detectable])) if detectable else None,
         "n_detectable": len(detectable), "n_injected": len(injected),
         "clean_verdict": clean[0]["verdict"] if clean else None,
         "per_error": {e: {"top1": float(np.mean([r["hit"] for r in rs])),
                           "smallest_detected": min([r["size"] for r in rs if r["hit"]], default=None),
+                          "detection_limit": rs[0].get("detection_limit"),
                           "unit": rs[0]["unit"]} for e, rs in per.items()},
     }
 
@@ -149,11 +162,12 @@ def format_field_selftest(res: dict) -> str:
                              f"{'named' if r['hit'] else 'not named'}")
     lines.append("")
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
-                 f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} whose own effect is "
-                 f"significant when fitted alone: {100 * (s['top1_detectable'] or 0):.0f} %")
+                 f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} at or above the "
+                 f"file's detection limit: {100 * (s['top1_detectable'] or 0):.0f} %")
     for e, v in s["per_error"].items():
         smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}"
-        lines.append(f"- {e}: top-1 {100 * v['top1']:.0f} %, smallest detected {smallest}")
+        limit = "unknown" if v.get("detection_limit") is None else f"{v['detection_limit']:.3g} {v['unit']}"
+        lines.append(f"- {e}: top-1 {100 * v['top1']:.0f} %, smallest detected {smallest}, detection limit {limit}")
     for e in res.get("skipped", []):
         lines.append(f"- {e}: not tried (needs a moving reference velocity)")
     return "\n".join(lines)
