@@ -350,3 +350,23 @@ def test_reference_delay_profile_holds_the_delay_and_reports_its_curvature():
     assert not fit.free[i] and fit.x[i] == delay
     assert model.base.runs[0].reference_shift_s == pytest.approx(delay)  # the model is exact at it
     assert r.verdict == "none"
+
+
+def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement():
+    """On a random-walk base an effect needs the coloured BIC beyond the margin and, out of sample,
+    a share of a held-out gap there is or a paired held-out z above 2: with a file's own effects in
+    the model the gap sits at the floor of levels estimated on it (winriver01), and the share
+    cannot tell. On the knots base the share and the gap floor stay the test."""
+    from adcpdyn.estimators.diagnosis.diagnose import EffectScore, significant
+
+    config = DiagnosisConfig()
+    s = EffectScore(effect="heave", delta_ll=80.0, delta_bic=-150.0, p_value=0.0, n_params=3, params={}, params_se={},
+                    gap_after=-0.02, shrink_fraction=0.0, velocity_error_m_s=None, success=True, status="ok",
+                    iterations=5, delta_bic_hac=-153.0, heldout_z=17.0)
+    assert significant(s, -0.02, config, walk=True)  # no gap left to share, the paired test sees it
+    assert not significant(dataclasses.replace(s, heldout_z=1.3), -0.02, config, walk=True)
+    assert not significant(dataclasses.replace(s, delta_bic_hac=-5.0), -0.02, config, walk=True)  # in sample: no
+    assert significant(dataclasses.replace(s, heldout_z=0.0, shrink_fraction=0.3), 0.4, config, walk=True)
+    assert not significant(dataclasses.replace(s, heldout_z=0.0, shrink_fraction=0.3), 0.05, config, walk=True)
+    assert not significant(s, -0.02, config, walk=False)  # knots: the gap floor holds
+    assert significant(dataclasses.replace(s, shrink_fraction=0.3), 0.4, config, walk=False)

@@ -386,3 +386,4 @@ def test_detection_limit_is_the_size_the_selection_takes():
     assert detection_limit("compass_offset_deg", {"compass_offset.A_rad": 0.01}) == pytest.approx(np.degrees(0.01))
     assert detection_limit("moving_bed_m_s", {"moving_bed.velocity_north_m_s": 0.02, "moving_bed.velocity_east_m_s": 0.05}) == 0.05
     assert detection_limit("heave_m_s", {"heave.cos_m": 0.01}) is None  # frequency-dependent: not claimed
+    assert detection_limit("tilt_lowpass_s", {"tilt_lowpass.tau_s": 0.1}) is None  # its linearisation is optimistic

@@ -38,6 +38,8 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
         tic = time.perf_counter()
         # the clean file's own effects are the file's: every injected error is diagnosed on top of them
         r = diagnose(run, dataclasses.replace(config, given=own) if own else config, calibration=calibration)
+        if error == "clean":
+            own, own_values = _own_effects(case, config, calibration, r)
         expected = "none" if error == "clean" else FIELD_ERRORS[error][0]
         mine = next((s for s in r.ranking if s["effect"] == expected and s["round"] == 1), None)
         row = {"error": error, "size": size, "unit": FIELD_ERRORS[error][1] if error != "clean" else "",
@@ -48,13 +50,12 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
         row["detection_limit"] = limits.get(error)
         row["outcome"] = outcome(row, mine, r, config.min_gap)
         if error == "clean":
+            row["verdict"] = "+".join(own) or "none"
             # the file's detection limits, before anything is injected: what each error's effect would need
             first = {sc["effect"]: sc for sc in r.ranking if sc["round"] == 1}
             limits = {e: detection_limit(e, first[spec[0]]["detection_limit"]) if spec[0] in first else None
                       for e, spec in FIELD_ERRORS.items()}
             row["detection_limits"] = limits
-            own = tuple(r.selected)
-            own_values = {name: next(s for s in r.ranking if s["effect"] == name and s["significant"]) for name in own}
             row["own_effects"] = list(own)
         elif mover := carrier(expected, own):  # the file carries it already: named when its estimate moves its way
             row.update(_moved({k: v for k, v in r.given.items() if k.split("/")[-1].startswith(mover + ".")},
@@ -65,6 +66,29 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
             progress(f"{error} {size:g}: {r.verdict}")
     return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": config.navigation,
             "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+
+
+def _own_effects(case: Case, config: DiagnosisConfig, calibration, first) -> tuple:
+    """The clean file's own effects and their joint estimates (effect -> {"params", "params_se"}): what
+    its diagnosis names, then what it names on top of those given, until nothing more (at most
+    ``config.max_effects``). The forward selection's later rounds judge against a held-out gap the
+    chosen effects have already emptied, so a file whose own effects are several (winriver01:
+    compass deviation, then an attitude delay and a moving bed on top of it given) would otherwise
+    have them named in every injected run instead of the injected error."""
+    own, r, given = tuple(first.selected), first, ()
+    while r.selected and len(own) < config.max_effects:
+        r, given = diagnose(case, dataclasses.replace(config, given=own), calibration=calibration), own
+        own = own + tuple(n for n in r.selected if n not in own)
+    if not own:
+        return own, {}
+    if given != own:
+        r = diagnose(case, dataclasses.replace(config, given=own), calibration=calibration)
+    values = {}
+    for name, v in r.given.items():
+        key = name.split("/")[-1]
+        entry = values.setdefault(key.split(".")[0], {"params": {}, "params_se": {}})
+        entry["params"][key], entry["params_se"][key] = v["value"], v["se"]
+    return own, values
 
 
 def carrier(effect: str, own) -> str | None:
