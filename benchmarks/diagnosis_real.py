@@ -71,6 +71,8 @@ def _summary(rows: list) -> dict:
         out[nav] = {**s, "false_alarms": int(sum(r["verdict"] != "none" for r in clean)), "clean_files": len(clean),
                     "clean_gaps": {r["file"]: r["gap"] for r in clean},
                     "own_effects": {r["file"]: r.get("own_effects", []) for r in clean if r.get("own_effects")},
+                    # per error and file: the clean run's detection limit (the error's unit)
+                    "limits": {e: {r["file"]: r.get("detection_limits", {}).get(e) for r in clean} for e in s["per_error"]},
                     "max_seconds": max((r["seconds"] for r in mine), default=None)}
     return out
 
@@ -88,7 +90,9 @@ def markdown_table(res: dict) -> str:
         for f, n in cols:
             r = cell.get((f, n, error, size))
             text = "" if r is None else r["verdict"]
-            if r is not None and not r["hit"] and r.get("outcome", "").startswith(("below", "not tried", "outscored", "no gap")):
+            if r is not None and not r["hit"] and r.get("outcome", "").startswith("under the file's detection limit"):
+                text += f" (under the file's limit {r['detection_limit']:.2g}{' ' + r['unit'] if r['unit'] else ''})"
+            elif r is not None and not r["hit"] and r.get("outcome", "").startswith(("below", "not tried", "outscored", "no gap")):
                 text += f" ({r['outcome'].split(' (')[0].split(':')[0]})"
             if r is not None and "shift_z" in r:  # the file's own effect: its estimate moved, or not
                 text += f" (own {r['expected']} moved {r['shift_z']:.1f} SE)"
@@ -101,10 +105,12 @@ def print_diagnosis(res: dict) -> None:
     print("\ndiagnosis on real files, field errors injected on the recorded channels, clean file's calibration")
     for nav, s in res["summary"].items():
         print(f"  {nav:>11s}: top-1 {100 * (s['top1'] or 0):.0f} % ({100 * (s['top1_detectable'] or 0):.0f} % of the "
-              f"{s['n_detectable']} of {s['n_injected']} whose own effect is significant alone), false alarms {s['false_alarms']} of "
-              f"{s['clean_files']} clean files, slowest {s['max_seconds'] or 0:.1f} s")
+              f"{s['n_detectable']} of {s['n_injected']} not under their file's detection limit), false alarms "
+              f"{s['false_alarms']} of {s['clean_files']} clean files, slowest {s['max_seconds'] or 0:.1f} s")
         for e, v in s["per_error"].items():
-            print(f"      {e:>22s}: top-1 {100 * v['top1']:.0f} %, smallest detected {v['smallest_detected']}")
+            limits = ", ".join(f"{f.split('.')[0]} {'-' if x is None else f'{x:.3g}'}" for f, x in s["limits"].get(e, {}).items())
+            print(f"      {e:>22s}: top-1 {100 * v['top1']:.0f} %, smallest detected {v['smallest_detected']}; "
+                  f"detection limits {limits}")
         print("      clean gaps: " + ", ".join(f"{f} {g:.3f}" for f, g in s["clean_gaps"].items()))
         for f, own in s.get("own_effects", {}).items():
             print(f"      {f} names {', '.join(own)} on its clean run (counted above as an alarm; its injected runs are "

@@ -149,8 +149,9 @@ def summarise(rows: list) -> dict:
             per.setdefault(r["error"], []).append(r)
     clean = [r for r in rows if r["error"] == "clean"]
     injected = [r for r in rows if r["error"] != "clean"]
-    # detectable: at or above the file's detection limit, computed on the clean run before any injection
-    detectable = [r for r in injected if r.get("detection_limit") is not None and r["size"] >= r["detection_limit"]]
+    # detectable: at or above the file's detection limit, computed on the clean run before any injection; an
+    # error without a limit (heave, tilt low-pass: none claimed) counts as detectable, so a miss there still counts
+    detectable = [r for r in injected if r.get("detection_limit") is None or r["size"] >= r["detection_limit"]]
     return {
         "top1": float(np.mean([r["hit"] for r in injected])) if injected else None,
         # top-1 among the injections at or above the file's detection limit (from the clean run's information
@@ -160,7 +161,9 @@ def summarise(rows: list) -> dict:
         "clean_verdict": clean[0]["verdict"] if clean else None,
         "per_error": {e: {"top1": float(np.mean([r["hit"] for r in rs])),
                           "smallest_detected": min([r["size"] for r in rs if r["hit"]], default=None),
-                          "detection_limit": rs[0].get("detection_limit"),
+                          # one file's limit (rows of several files, a bench, have several: None here)
+                          "detection_limit": rs[0].get("detection_limit")
+                          if len({r.get("detection_limit") for r in rs}) == 1 else None,
                           "unit": rs[0]["unit"]} for e, rs in per.items()},
     }
 
@@ -186,7 +189,7 @@ def format_field_selftest(res: dict) -> str:
                              f"{'named' if r['hit'] else 'not named'}")
     lines.append("")
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
-                 f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} at or above the "
+                 f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} not under the "
                  f"file's detection limit: {100 * (s['top1_detectable'] or 0):.0f} %")
     for e, v in s["per_error"].items():
         smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}"
