@@ -361,9 +361,11 @@ def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement(
 
     config = DiagnosisConfig()
     s = EffectScore(effect="heave", delta_ll=80.0, delta_bic=-150.0, p_value=0.0, n_params=3, params={}, params_se={},
-                    gap_after=-0.02, shrink_fraction=0.0, velocity_error_m_s=None, success=True, status="ok",
+                    gap_after=-0.17, shrink_fraction=0.0, velocity_error_m_s=None, success=True, status="ok",
                     iterations=5, delta_bic_hac=-153.0, heldout_z=17.0)
     assert significant(s, -0.02, config, walk=True)  # no gap left to share, the paired test sees it
+    # significant but not practical: a held-out improvement of 0.006 of the excess (a long run's z grows with its pings)
+    assert not significant(dataclasses.replace(s, gap_after=-0.026, heldout_z=5.5), -0.02, config, walk=True)
     assert not significant(dataclasses.replace(s, heldout_z=1.3), -0.02, config, walk=True)
     assert not significant(dataclasses.replace(s, delta_bic_hac=-5.0), -0.02, config, walk=True)  # in sample: no
     assert significant(dataclasses.replace(s, heldout_z=0.0, shrink_fraction=0.3), 0.4, config, walk=True)
