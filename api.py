@@ -99,7 +99,7 @@ class Comparison:
         ``truth`` (a simulated case's /truth) or ``reference`` (the measured reference velocity:
         the GNSS, or the vessel known at rest).
     table : dict
-        Method (and ``against``) -> the paper's metrics (:func:`~adcpdyn.estimators.metrics.velocity_metrics`).
+        Method (and ``against``) -> the paper's metrics (:func:`~adcpdyn.estimators.statistics.metrics.velocity_metrics`).
     corrections : dict
         Method -> :class:`~adcpdyn.estimators.asc.Correction`.
     not_run : dict
@@ -125,7 +125,7 @@ class Comparison:
 
     def format_table(self) -> str:
         """The metrics table as text (what ``adcpdyn compare`` prints)."""
-        from .estimators.metrics import format_table
+        from .estimators.statistics.metrics import format_table
 
         return format_table(self.table)
 
@@ -524,7 +524,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
     from .cases.coverage import reference_at
     from .estimators.calibration.record import as_record
     from .estimators.correct_case import as_calibrated_run, correct_case
-    from .estimators.metrics import velocity_metrics
+    from .estimators.statistics.metrics import velocity_metrics
 
     _choice("fmt", fmt, FIGURE_FORMATS)
     if out is not None:

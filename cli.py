@@ -478,8 +478,8 @@ def cmd_demo(args) -> int:
     from .cases.scenario import get_scenario
     from .cases.summary import summarise
     from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
-    from .estimators.evaluation import calibration_errors
-    from .estimators.metrics import format_table, velocity_metrics
+    from .estimators.statistics.evaluation import calibration_errors
+    from .estimators.statistics.metrics import format_table, velocity_metrics
     from .models.rotations import euler_matrix
     from .cases.simulation import simulate
     from .plots import attitude_fit_figure, radius_vectors_figure, velocity_figure

@@ -30,7 +30,7 @@ def _calibrate(case, **kw):
 def bench_calibration(seeds: int = 20, starts: int = 8, deep_seeds: int = 2) -> dict:
     """Joint vs two-stage calibration over noise seeds; installation angles vs Qiao et al."""
     from ..cases.scenario import get_scenario
-    from ..estimators.evaluation import calibration_errors
+    from ..estimators.statistics.evaluation import calibration_errors
     from ..estimators.qiao import qiao_calibration
     from ..cases.simulation import simulate
 

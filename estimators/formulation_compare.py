@@ -18,9 +18,9 @@ def compare_formulations(case: Case, config: CalibrationConfig, formulations=FOR
     Each row: objective, max constraint violation, wall time, iterations (best start
     and mean over starts), share of starts at the best, success, the unobservable and
     weak lever-arm directions, and, for a simulated case, the errors against truth
-    (:func:`~adcpdyn.estimators.evaluation.calibration_errors`).
+    (:func:`~adcpdyn.estimators.statistics.evaluation.calibration_errors`).
     """
-    from .evaluation import calibration_errors
+    from .statistics.evaluation import calibration_errors
 
     rows = {}
     for form in formulations:

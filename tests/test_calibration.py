@@ -15,7 +15,7 @@ from conftest import noise_free
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate
 from adcpdyn.solvers.multistart import SolverOptions
-from adcpdyn.estimators.evaluation import calibration_errors, true_attitude
+from adcpdyn.estimators.statistics.evaluation import calibration_errors, true_attitude
 from adcpdyn.models.measurement import bottom_track_function
 from adcpdyn.models.motion import attitude_function
 from adcpdyn.models.rotations import euler_matrix
@@ -388,7 +388,7 @@ def test_uncertainty_rank_is_not_set_by_one_near_exact_channel():
     and one the data do not touch: the second keeps its standard error 1 (a threshold relative
     to the largest eigenvalue would call it unobservable), the third is named unobservable.
     Closed form: J diagonal, so the covariance is diag(1 / J_ii^2)."""
-    from adcpdyn.estimators.uncertainty import uncertainty
+    from adcpdyn.estimators.statistics.uncertainty import uncertainty
 
     J = np.array([[1e7, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [3e6, 0.0, 0.0]])
     u = uncertainty(J, None, ["heading_bias", "P_x", "P_y"], np.ones(3))

@@ -44,7 +44,7 @@ def _metric_rows(speed_m_s: float, distance_m: float) -> dict:
 
 @pytest.mark.parametrize("speed_m_s, distance_m", [(0.0085, 0.381), (5.2, 12345.678)])  # a pool boat, a ship
 def test_metric_table_fits_100_characters_with_units_one_decimal_percentages_and_a_legend(speed_m_s, distance_m):
-    from adcpdyn.estimators.metrics import METRIC_COLUMNS, format_table
+    from adcpdyn.estimators.statistics.metrics import METRIC_COLUMNS, format_table
 
     text = format_table(_metric_rows(speed_m_s, distance_m))
     lines = text.splitlines()
