@@ -31,7 +31,7 @@ def bench_calibration(seeds: int = 20, starts: int = 8, deep_seeds: int = 2) -> 
     """Joint vs two-stage calibration over noise seeds; installation angles vs Qiao et al."""
     from ..cases.scenario import get_scenario
     from ..estimators.statistics.evaluation import calibration_errors
-    from ..estimators.qiao import qiao_calibration
+    from ..estimators.baselines.qiao import qiao_calibration
     from ..cases.simulation import simulate
 
     methods = {

@@ -272,7 +272,7 @@ def test_bad_configuration_is_rejected_with_the_allowed_values():
 
 
 def test_three_ping_exact_solve_is_singular_along_the_beams_unless_frames_are_mixed():
-    from adcpdyn.estimators.three_ping import three_ping_solve
+    from adcpdyn.estimators.baselines.three_ping import three_ping_solve
 
     case = simulate(noise_free(get_scenario("pool_diag")), seed=3)
     consistent = three_ping_solve(case)
@@ -283,7 +283,7 @@ def test_three_ping_exact_solve_is_singular_along_the_beams_unless_frames_are_mi
 
 
 def test_qiao_baseline_finds_installation_yaw():
-    from adcpdyn.estimators.qiao import qiao_calibration
+    from adcpdyn.estimators.baselines.qiao import qiao_calibration
 
     sc = get_scenario("deep_ship")
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=120.0))
