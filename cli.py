@@ -213,8 +213,8 @@ def _prepare(path, say: bool = True):
     return case, notes
 
 
-from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
-from .estimators.correct_case import correct_case as _correct  # noqa: E402
+from .estimators.correction.correct_case import CORRECTION_METHODS  # noqa: E402
+from .estimators.correction.correct_case import correct_case as _correct  # noqa: E402
 from .solvers.nlp_methods import METHODS  # noqa: E402
 
 

@@ -176,7 +176,7 @@ def bench_correction(sizes, repeats: int = 3) -> dict:
     import os
 
     from ..cases.scenario import get_scenario
-    from ..estimators.adc import dynamic_correction
+    from ..estimators.correction.adc import dynamic_correction
     from ..estimators.asc import asc
     from ..estimators.attitude_fit import fit_attitude
     from ..estimators.calibration.record import CalibrationRecord

@@ -210,7 +210,7 @@ def test_head_sensor_heading_misalignment_against_reference_and_applied_by_corre
     """A head compass reading 25 degrees too far clockwise: calibration finds -25 degrees and the
     static correction with that CALIB.json follows the true course, while without it it does not."""
     from adcpdyn.estimators.calibration.record import as_record
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     offset = np.deg2rad(25.0)
     sc = get_scenario("diag_boat")
@@ -357,7 +357,7 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
 def test_static_correction_with_undetermined_installation_uses_the_nominal_angles_and_says_so():
     from adcpdyn.estimators.asc import asc
     from adcpdyn.estimators.calibration.record import as_record
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     sc = get_scenario("deep_ship")
     case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=1)

@@ -94,7 +94,7 @@ def test_correct_adds_the_run_bed_back_and_says_so(survey, joint, tmp_path):
     """Bottom track measures the vessel over the bed: with the calibration's bed added back, the
     static correction's velocity matches the true velocity over ground; without, it is off by the bed."""
     from adcpdyn.estimators.calibration.record import as_record
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     path = tmp_path / "calib.json"
     joint.to_json(path)
