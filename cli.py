@@ -457,7 +457,7 @@ def cmd_calibrate(args) -> int:
 
 def cmd_compare_formulations(args) -> int:
     from .cases.atomic import check_output_file
-    from .estimators.formulation_compare import compare_formulations, format_rows
+    from .estimators.calibration.formulation_compare import compare_formulations, format_rows
 
     if args.out:
         check_output_file(args.out, args.case)
