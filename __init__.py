@@ -18,8 +18,9 @@ Functions: :func:`read_case`, :func:`import_file`, :func:`simulate`, :func:`cali
 ``Correction``, ``Comparison``, ``DiagnosisResult`` (imported on first use: CasADi loads
 only when a calibration type or verb needs it).
 
-Sub-packages: ``models`` (symbolic physics), ``estimators`` (calibration and
-correction), ``solvers`` (numerical drivers), ``cases`` (case files and scenarios).
+Sub-packages: ``models`` (symbolic physics), ``estimators`` (calibration, correction,
+diagnosis, baselines, statistics), ``solvers`` (numerical drivers), ``cases`` (case files
+and scenarios).
 """
 
 from importlib.metadata import PackageNotFoundError as _NotInstalled

@@ -99,7 +99,7 @@ class Comparison:
         ``truth`` (a simulated case's /truth) or ``reference`` (the measured reference velocity:
         the GNSS, or the vessel known at rest).
     table : dict
-        Method (and ``against``) -> the paper's metrics (:func:`~adcpdyn.estimators.metrics.velocity_metrics`).
+        Method (and ``against``) -> the paper's metrics (:func:`~adcpdyn.estimators.statistics.metrics.velocity_metrics`).
     corrections : dict
         Method -> :class:`~adcpdyn.estimators.asc.Correction`.
     not_run : dict
@@ -125,7 +125,7 @@ class Comparison:
 
     def format_table(self) -> str:
         """The metrics table as text (what ``adcpdyn compare`` prints)."""
-        from .estimators.metrics import format_table
+        from .estimators.statistics.metrics import format_table
 
         return format_table(self.table)
 
@@ -451,7 +451,7 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     """
     from .cases.hashing import sha256_of
     from .estimators.calibration.record import as_record
-    from .estimators.correct_case import as_calibrated_run, correct_case
+    from .estimators.correction.correct_case import as_calibrated_run, correct_case
 
     _choice("method", method, CORRECTION_METHODS)
     _choice("timing", timing, TIMINGS)
@@ -523,8 +523,8 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
 
     from .cases.coverage import reference_at
     from .estimators.calibration.record import as_record
-    from .estimators.correct_case import as_calibrated_run, correct_case
-    from .estimators.metrics import velocity_metrics
+    from .estimators.correction.correct_case import as_calibrated_run, correct_case
+    from .estimators.statistics.metrics import velocity_metrics
 
     _choice("fmt", fmt, FIGURE_FORMATS)
     if out is not None:
@@ -615,7 +615,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         Too few pings, no attitude, an unknown effect or option (one line).
     """
     from .estimators.calibration.record import as_record
-    from .estimators.correct_case import as_calibrated_run
+    from .estimators.correction.correct_case import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
     _choice("fmt", fmt, FIGURE_FORMATS)
@@ -682,7 +682,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "knots", effects
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
     from .estimators.calibration.record import as_record
-    from .estimators.correct_case import as_calibrated_run
+    from .estimators.correction.correct_case import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
     _choice("fmt", fmt, FIGURE_FORMATS)

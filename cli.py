@@ -213,8 +213,8 @@ def _prepare(path, say: bool = True):
     return case, notes
 
 
-from .estimators.correct_case import CORRECTION_METHODS  # noqa: E402
-from .estimators.correct_case import correct_case as _correct  # noqa: E402
+from .estimators.correction.correct_case import CORRECTION_METHODS  # noqa: E402
+from .estimators.correction.correct_case import correct_case as _correct  # noqa: E402
 from .solvers.nlp_methods import METHODS  # noqa: E402
 
 
@@ -457,7 +457,7 @@ def cmd_calibrate(args) -> int:
 
 def cmd_compare_formulations(args) -> int:
     from .cases.atomic import check_output_file
-    from .estimators.formulation_compare import compare_formulations, format_rows
+    from .estimators.calibration.formulation_compare import compare_formulations, format_rows
 
     if args.out:
         check_output_file(args.out, args.case)
@@ -478,8 +478,8 @@ def cmd_demo(args) -> int:
     from .cases.scenario import get_scenario
     from .cases.summary import summarise
     from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
-    from .estimators.evaluation import calibration_errors
-    from .estimators.metrics import format_table, velocity_metrics
+    from .estimators.statistics.evaluation import calibration_errors
+    from .estimators.statistics.metrics import format_table, velocity_metrics
     from .models.rotations import euler_matrix
     from .cases.simulation import simulate
     from .plots import attitude_fit_figure, radius_vectors_figure, velocity_figure

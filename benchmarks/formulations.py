@@ -17,7 +17,7 @@ def bench_formulations(seeds: int, starts: int) -> dict:
     """Every formulation on each scenario and noise seed (one case per seed, shared by all)."""
     from ..cases.scenario import get_scenario
     from ..estimators.calibration.problem import CalibrationConfig
-    from ..estimators.formulation_compare import compare_formulations
+    from ..estimators.calibration.formulation_compare import compare_formulations
     from ..cases.simulation import simulate
 
     out = {"suite": "formulations", "machine": machine(), "seeds": list(range(1, seeds + 1)), "starts": starts,

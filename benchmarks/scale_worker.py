@@ -27,7 +27,7 @@ def long_run(n_pings: int):
 
 def measure(n_pings: int, seed: int) -> dict:
     """Simulate, then calibrate (one start, one worker) and time each step; peak RSS in MB."""
-    from ..estimators.evaluation import calibration_errors
+    from ..estimators.statistics.evaluation import calibration_errors
     from ..cases.simulation import simulate
     from .common import timed_calibration
     from ..solvers.multistart import SolverOptions

@@ -30,8 +30,8 @@ def _calibrate(case, **kw):
 def bench_calibration(seeds: int = 20, starts: int = 8, deep_seeds: int = 2) -> dict:
     """Joint vs two-stage calibration over noise seeds; installation angles vs Qiao et al."""
     from ..cases.scenario import get_scenario
-    from ..estimators.evaluation import calibration_errors
-    from ..estimators.qiao import qiao_calibration
+    from ..estimators.statistics.evaluation import calibration_errors
+    from ..estimators.baselines.qiao import qiao_calibration
     from ..cases.simulation import simulate
 
     methods = {
@@ -176,7 +176,7 @@ def bench_correction(sizes, repeats: int = 3) -> dict:
     import os
 
     from ..cases.scenario import get_scenario
-    from ..estimators.adc import dynamic_correction
+    from ..estimators.correction.adc import dynamic_correction
     from ..estimators.asc import asc
     from ..estimators.attitude_fit import fit_attitude
     from ..estimators.calibration.record import CalibrationRecord

@@ -118,7 +118,7 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     case : Case
         The case (recorded radial velocities, attitude, bottom track, reference, profile).
     correction : Correction, optional
-        A correction of this case (:func:`~adcpdyn.estimators.correct_case.correct_case`):
+        A correction of this case (:func:`~adcpdyn.estimators.correction.correct_case.correct_case`):
         vessel and water velocities in ENU, the method and what it applied as attributes.
     provenance : dict, optional
         The case file's ``/provenance`` (:func:`read_provenance`): instrument beam numbers,

@@ -1,0 +1,1 @@
+"""Estimators, by stage: calibration/, correction/, diagnosis/, baselines/, statistics/; at this top the ground they share (measurement model, row Jacobian, formulations, attitude pre-fit, static correction, water reference)."""

@@ -8,7 +8,7 @@ the bottom track it turns bt - w (the bottom-track vessel velocity added, beam b
 referenced to the GNSS it adds the GNSS velocity interpolated to the pings. The dynamic
 corrections solve each cell with a vessel velocity: the bottom track's, or the centre of
 rotation's from the GNSS (the antenna's velocity less its tangential velocity
-dLambda/dt p), see :func:`~adcpdyn.estimators.adc.dynamic_correction`.
+dLambda/dt p), see :func:`~adcpdyn.estimators.correction.adc.dynamic_correction`.
 """
 
 from __future__ import annotations

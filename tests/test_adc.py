@@ -10,7 +10,7 @@ from conftest import noise_free
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
-from adcpdyn.estimators.adc import dynamic_correction
+from adcpdyn.estimators.correction.adc import dynamic_correction
 from adcpdyn.estimators.asc import asc
 from adcpdyn.estimators.calibration.record import CalibrationRecord
 from adcpdyn.models.rotations import euler_matrix

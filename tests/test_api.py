@@ -47,7 +47,7 @@ def test_import_adcpdyn_is_light_and_exposes_the_api():
 
 def test_correct_takes_the_result_its_dict_its_file_and_its_record_with_the_same_numbers(calibrated):
     from adcpdyn.estimators.calibration.record import as_record
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     result, path, _, m1 = calibrated
     forms = {"result": result, "dict": result.to_dict(), "path": path, "str": str(path),

@@ -15,7 +15,7 @@ from conftest import noise_free
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate
 from adcpdyn.solvers.multistart import SolverOptions
-from adcpdyn.estimators.evaluation import calibration_errors, true_attitude
+from adcpdyn.estimators.statistics.evaluation import calibration_errors, true_attitude
 from adcpdyn.models.measurement import bottom_track_function
 from adcpdyn.models.motion import attitude_function
 from adcpdyn.models.rotations import euler_matrix
@@ -210,7 +210,7 @@ def test_head_sensor_heading_misalignment_against_reference_and_applied_by_corre
     """A head compass reading 25 degrees too far clockwise: calibration finds -25 degrees and the
     static correction with that CALIB.json follows the true course, while without it it does not."""
     from adcpdyn.estimators.calibration.record import as_record
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     offset = np.deg2rad(25.0)
     sc = get_scenario("diag_boat")
@@ -272,7 +272,7 @@ def test_bad_configuration_is_rejected_with_the_allowed_values():
 
 
 def test_three_ping_exact_solve_is_singular_along_the_beams_unless_frames_are_mixed():
-    from adcpdyn.estimators.three_ping import three_ping_solve
+    from adcpdyn.estimators.baselines.three_ping import three_ping_solve
 
     case = simulate(noise_free(get_scenario("pool_diag")), seed=3)
     consistent = three_ping_solve(case)
@@ -283,7 +283,7 @@ def test_three_ping_exact_solve_is_singular_along_the_beams_unless_frames_are_mi
 
 
 def test_qiao_baseline_finds_installation_yaw():
-    from adcpdyn.estimators.qiao import qiao_calibration
+    from adcpdyn.estimators.baselines.qiao import qiao_calibration
 
     sc = get_scenario("deep_ship")
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=120.0))
@@ -357,7 +357,7 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
 def test_static_correction_with_undetermined_installation_uses_the_nominal_angles_and_says_so():
     from adcpdyn.estimators.asc import asc
     from adcpdyn.estimators.calibration.record import as_record
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     sc = get_scenario("deep_ship")
     case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=1)
@@ -388,7 +388,7 @@ def test_uncertainty_rank_is_not_set_by_one_near_exact_channel():
     and one the data do not touch: the second keeps its standard error 1 (a threshold relative
     to the largest eigenvalue would call it unobservable), the third is named unobservable.
     Closed form: J diagonal, so the covariance is diag(1 / J_ii^2)."""
-    from adcpdyn.estimators.uncertainty import uncertainty
+    from adcpdyn.estimators.statistics.uncertainty import uncertainty
 
     J = np.array([[1e7, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [3e6, 0.0, 0.0]])
     u = uncertainty(J, None, ["heading_bias", "P_x", "P_y"], np.ones(3))

@@ -154,7 +154,7 @@ def test_every_reader_uses_the_validation(written, tmp_path, capsys, argv):
 
 def test_in_memory_calibrations_are_validated_too(written):
     from adcpdyn.cases.io import read_case
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     d, m1 = written
     case = read_case(m1)

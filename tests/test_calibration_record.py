@@ -11,7 +11,7 @@ import pytest
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.calibration.record import CalibrationRecord, as_record
 from adcpdyn.estimators.calibration.result import CalibrationResult
-from adcpdyn.estimators.correct_case import correct_case
+from adcpdyn.estimators.correction.correct_case import correct_case
 from adcpdyn.cases.simulation import simulate
 from conftest import calibrated_pool_m0
 

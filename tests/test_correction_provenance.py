@@ -19,7 +19,7 @@ from adcpdyn.cases.netcdf import correction_from_file, export_file
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
 from adcpdyn.estimators.calibration.record import CalibrationRecord, as_record
-from adcpdyn.estimators.correct_case import correct_case
+from adcpdyn.estimators.correction.correct_case import correct_case
 
 xr = pytest.importorskip("xarray")
 

@@ -133,7 +133,7 @@ def test_netcdf_records_the_calibrated_transducer_depth_and_the_entered_one(pool
 def test_correct_applies_the_site_bed_where_a_runs_own_is_half_determined(pool_calibration):
     """One bed lookup for every reader: a run whose east bed component is not determined (null)
     gets the site's bed, never a NaN that would blank its east velocities."""
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     _, path, _ = pool_calibration
     d = json.loads(path.read_text())

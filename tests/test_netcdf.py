@@ -17,7 +17,7 @@ from adcpdyn.cases.io import write_case
 from adcpdyn.cases.netcdf import export_file, to_xarray, write_netcdf
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
-from adcpdyn.estimators.correct_case import correct_case
+from adcpdyn.estimators.correction.correct_case import correct_case
 from adcpdyn.cases.simulation import simulate
 
 xr = pytest.importorskip("xarray")

@@ -44,7 +44,7 @@ def _metric_rows(speed_m_s: float, distance_m: float) -> dict:
 
 @pytest.mark.parametrize("speed_m_s, distance_m", [(0.0085, 0.381), (5.2, 12345.678)])  # a pool boat, a ship
 def test_metric_table_fits_100_characters_with_units_one_decimal_percentages_and_a_legend(speed_m_s, distance_m):
-    from adcpdyn.estimators.metrics import METRIC_COLUMNS, format_table
+    from adcpdyn.estimators.statistics.metrics import METRIC_COLUMNS, format_table
 
     text = format_table(_metric_rows(speed_m_s, distance_m))
     lines = text.splitlines()
@@ -77,7 +77,7 @@ def test_a_table_too_wide_is_split_into_blocks_each_repeating_the_first_column()
 
 def test_diagnosis_effect_table_and_formulation_table_fit_100_characters():
     from adcpdyn.estimators.diagnosis.report import parameter_text
-    from adcpdyn.estimators.formulation_compare import format_rows
+    from adcpdyn.estimators.calibration.formulation_compare import format_rows
 
     row = {"objective": 1234.5678, "max_constraint_violation": 1.2e-9, "time_s": 1.234, "iterations_best": 23,
            "iterations_mean": 31.25, "fraction_at_best": 0.875, "n_unobservable": 0, "n_weak": 1,

@@ -11,8 +11,8 @@ from scipy.optimize import root
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.adc import _geometry, _ping_model
-from adcpdyn.estimators.evaluation import true_attitude
+from adcpdyn.estimators.correction.adc import _geometry, _ping_model
+from adcpdyn.estimators.statistics.evaluation import true_attitude
 from adcpdyn.models.doppler import ratio_from_radial, receive_time_paper, reported_range, slant_range
 from adcpdyn.models.janus import beam_to_instrument
 from adcpdyn.models.kinematics import centre_of_rotation_depth

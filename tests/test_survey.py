@@ -94,7 +94,7 @@ def test_correct_adds_the_run_bed_back_and_says_so(survey, joint, tmp_path):
     """Bottom track measures the vessel over the bed: with the calibration's bed added back, the
     static correction's velocity matches the true velocity over ground; without, it is off by the bed."""
     from adcpdyn.estimators.calibration.record import as_record
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     path = tmp_path / "calib.json"
     joint.to_json(path)
@@ -135,7 +135,7 @@ def test_joint_problem_is_block_sparse_and_its_assembled_jacobian_is_casadis(sur
 def test_newey_west_recovers_the_long_run_variance_of_an_ar1_mean():
     """Closed form: the mean of T AR(1) values (rho, unit innovations) has variance
     sigma^2 / (1 - rho)^2 / T for large T; the white formula gives (1 / (1 - rho^2)) / T."""
-    from adcpdyn.estimators.hac import sandwich
+    from adcpdyn.estimators.statistics.hac import sandwich
 
     rng = np.random.default_rng(5)
     T, rho = 20000, 0.8

@@ -11,10 +11,10 @@ from conftest import noise_free
 
 from adcpdyn.cases.case import Reference
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.adc import dynamic_correction
+from adcpdyn.estimators.correction.adc import dynamic_correction
 from adcpdyn.estimators.asc import asc
 from adcpdyn.estimators.calibration.record import CalibrationRecord
-from adcpdyn.estimators.correct_case import correct_case, with_moving_bed
+from adcpdyn.estimators.correction.correct_case import correct_case, with_moving_bed
 from adcpdyn.estimators.water import check_reference, reference_velocity_at
 from adcpdyn.models.motion import AttitudeParams, evaluate_attitude
 from adcpdyn.models.rotations import euler_matrix

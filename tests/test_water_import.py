@@ -141,7 +141,7 @@ def test_exported_netcdf_equals_the_instrument_earth_velocities(tmp_path, import
     """The same check through ``correct_case`` and the CF export read back with xarray (ENU, beams, time)."""
     xr = pytest.importorskip("xarray")
     from adcpdyn.cases.netcdf import to_xarray, write_netcdf
-    from adcpdyn.estimators.correct_case import correct_case
+    from adcpdyn.estimators.correction.correct_case import correct_case
 
     case, attrs = imported(name)
     write_netcdf(to_xarray(case, correct_case(case, "asc", None), provenance=attrs["/provenance"]), tmp_path / "w.nc")

@@ -1,1 +1,1 @@
-"""Calibration: the joint NLP (problem), its CALIB.json (file schema, typed record, result), whose it is (identity) and the moving-bed decision."""
+"""Calibration: the joint NLP (problem), its CALIB.json (file schema, typed record, result), whose it is (identity), the moving-bed decision and every lever-arm formulation side by side (formulation_compare)."""

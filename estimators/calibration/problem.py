@@ -37,10 +37,10 @@ from ...models.rotations import euler_matrix
 from ...solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..formulations import FORMULATIONS
-from ..hac import sandwich
+from ..statistics.hac import sandwich
 from ..measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
                                  heading_span, knot_times)
-from ..uncertainty import uncertainty
+from ..statistics.uncertainty import uncertainty
 from .moving_bed_decision import mean_flow_speed, moving_bed_test
 from .result import CalibrationResult, RunResult
 

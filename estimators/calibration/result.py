@@ -22,7 +22,7 @@ import numpy as np
 from ...cases.identity import InstrumentIdentity, Site
 from ...models.motion import AttitudeParams
 from ...solvers.multistart import MultistartResult
-from ..uncertainty import Uncertainty
+from ..statistics.uncertainty import Uncertainty
 
 SCHEMA_VERSION = 3
 

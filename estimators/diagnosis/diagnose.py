@@ -42,7 +42,7 @@ from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration.problem import ATTITUDES, choose_attitude
 from ..calibration.record import CalibrationRecord
-from ..hac import andrews_lags, newey_west, sandwich
+from ..statistics.hac import andrews_lags, newey_west, sandwich
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  knot_times, ping_knots)
 from . import where as where_mod

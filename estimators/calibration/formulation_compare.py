@@ -7,9 +7,9 @@ import time
 
 import numpy as np
 
-from ..cases.case import Case
-from .calibration.problem import CalibrationConfig, CalibrationProblem
-from .formulations import FORMULATIONS
+from ...cases.case import Case
+from .problem import CalibrationConfig, CalibrationProblem
+from ..formulations import FORMULATIONS
 
 
 def compare_formulations(case: Case, config: CalibrationConfig, formulations=FORMULATIONS) -> dict:
@@ -18,9 +18,9 @@ def compare_formulations(case: Case, config: CalibrationConfig, formulations=FOR
     Each row: objective, max constraint violation, wall time, iterations (best start
     and mean over starts), share of starts at the best, success, the unobservable and
     weak lever-arm directions, and, for a simulated case, the errors against truth
-    (:func:`~adcpdyn.estimators.evaluation.calibration_errors`).
+    (:func:`~adcpdyn.estimators.statistics.evaluation.calibration_errors`).
     """
-    from .evaluation import calibration_errors
+    from ..statistics.evaluation import calibration_errors
 
     rows = {}
     for form in formulations:
@@ -54,7 +54,7 @@ TRUTH_LEGEND = "; TangRMS: tangential radial velocity error, LeverRMS: lever-arm
 
 def format_rows(rows: dict) -> str:
     """The comparison as a fixed-width table (:func:`~adcpdyn.text.text_table`), units under the headers."""
-    from ..text import Column, text_table
+    from ...text import Column, text_table
 
     truth = any("tangential_radial_rms_m_s" in r for r in rows.values())
     columns = [Column(key, head, unit, spec=spec) for key, head, unit, spec in FORMULATION_COLUMNS]

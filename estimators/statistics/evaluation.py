@@ -12,9 +12,9 @@ import json
 
 import numpy as np
 
-from ..cases.case import Case
-from ..models.motion import AttitudeParams, evaluate_attitude
-from ..models.rotations import euler_matrix
+from ...cases.case import Case
+from ...models.motion import AttitudeParams, evaluate_attitude
+from ...models.rotations import euler_matrix
 
 
 def true_attitude(case: Case) -> AttitudeParams:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..models.rotations import course_difference_rad
+from ...models.rotations import course_difference_rad
 
 
 def _trapezoid_displacement(t, v):
@@ -87,7 +87,7 @@ METRIC_LEGEND = ("Speeds horizontal. R: relative (to the mean); MAE, MRE: mean a
 def format_table(rows: dict[str, dict[str, float]]) -> str:
     """A plain-text table, one row per method, at most :data:`~adcpdyn.text.TABLE_WIDTH`
     characters wide: a unit under every header and the abbreviations in words below."""
-    from ..text import Column, text_table
+    from ...text import Column, text_table
 
     columns = [Column(k, head, unit, decimals, scale, significant=3 if unit == "m" else None)
                for k, (head, unit, decimals, scale) in METRIC_COLUMNS.items()]

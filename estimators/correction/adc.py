@@ -28,16 +28,16 @@ import dataclasses
 
 import numpy as np
 
-from ..cases.case import Case
-from ..models.doppler import ratio_from_radial, receive_time_paper, slant_range
-from ..models.janus import beam_to_instrument
-from ..models.kinematics import centre_of_rotation_depth
-from ..models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
-from ..models.rotations import euler_matrix
-from ..models.sensors import compass_correction
-from ..cases.corrected import Correction, CorrectionProvenance
-from .attitude_fit import fit_attitude, sampled_attitude
-from .calibration.record import CalibrationRecord
+from ...cases.case import Case
+from ...models.doppler import ratio_from_radial, receive_time_paper, slant_range
+from ...models.janus import beam_to_instrument
+from ...models.kinematics import centre_of_rotation_depth
+from ...models.motion import AttitudeParams, SampledAttitude, evaluate_attitude
+from ...models.rotations import euler_matrix
+from ...models.sensors import compass_correction
+from ...cases.corrected import Correction, CorrectionProvenance
+from ..attitude_fit import fit_attitude, sampled_attitude
+from ..calibration.record import CalibrationRecord
 
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
 
@@ -77,7 +77,7 @@ def _geometry(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, tangen
               rows=slice(None), options=None):
     """A (N, 4, 3) and b (N, 4) of Eq. 89 for every ping (or the pings ``rows``) and beam, and their
     four-beam least squares V (N, 3), e (N,) (:func:`~adcpdyn.solvers.rootfinder.closed_form_bottom_track`)."""
-    from ..solvers.rootfinder import closed_form_bottom_track
+    from ...solvers.rootfinder import closed_form_bottom_track
 
     return closed_form_bottom_track(**_ping_model(case, attitude, lever_arms_s, ypr_st, rows), timing=timing,
                                     tangential=tangential, options=options)
@@ -156,7 +156,7 @@ def _solve(A, b, beam_dirs_t, beams_allowed, four_beam=None):
 
 def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing: str, options=None):
     """Exact four-beam solve of every complete ping; the closed form's three-beam solution elsewhere."""
-    from ..solvers.rootfinder import solve_bottom_track
+    from ...solvers.rootfinder import solve_bottom_track
 
     bt = case.pings.bt_radial_m_s
     n_good = np.isfinite(bt).sum(axis=1)
@@ -240,7 +240,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: Calibration
     if method == "oracle":
         if case.truth is None or "attitude_model" not in case.truth.extra_attrs:
             raise ValueError(f"{case.name}: /truth: the oracle needs a case simulated by adcpdyn (true attitude model)")
-        from .calibration.file import attitude_model_from
+        from ..calibration.file import attitude_model_from
 
         attitude = attitude_model_from(case.truth.extra_attrs["attitude_model"],
                                        f'{case.name}: /truth.attrs["attitude_model"]')
@@ -274,7 +274,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: Calibration
 
 def _referenced_water(case, attitude, lever, ypr_st, V, tangential, timing, reference, calibration, oracle):
     """Water cells referenced to the bottom track (``V``) or the GNSS, and relative to G (G at rest)."""
-    from .water import REFERENCE_NOTES, centre_velocity_from_reference, check_reference, reference_point_in_sensor_frame
+    from ..water import REFERENCE_NOTES, centre_velocity_from_reference, check_reference, reference_point_in_sensor_frame
 
     check_reference(reference, case)
     if reference == "gnss":

@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..cases.case import Case
-from ..models.rotations import euler_matrices, euler_matrix
-from .asc import asc, attitude_at
+from ...cases.case import Case
+from ...models.rotations import euler_matrices, euler_matrix
+from ..asc import asc, attitude_at
 
 MIN_SPEED_M_S = 0.3
 

@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 
-from ..cases.case import Case
-from .calibration.record import CalibrationRecord
+from ...cases.case import Case
+from ..calibration.record import CalibrationRecord
 
 CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
 
@@ -34,7 +34,7 @@ def as_calibrated_run(case: Case, path, calibration: CalibrationRecord | None,
     file name when the cases shared one) so that :meth:`CalibrationRecord.moving_bed_for` finds its own run."""
     from pathlib import Path
 
-    from .calibration.identity import check_calibration_identity
+    from ..calibration.identity import check_calibration_identity
 
     runs = [] if calibration is None else [r.case for r in calibration.runs]
     if case.name not in runs and Path(path).stem in runs:
@@ -62,7 +62,7 @@ def correct_case(case: Case, method: str, calibration: CalibrationRecord | None 
                  reference: str = "bt"):
     """``asc`` (installation angles from the calibration for vessel-frame sensors; for a head
     sensor, its heading misalignment) or a dynamic method of
-    :func:`~adcpdyn.estimators.adc.dynamic_correction` with its ``timing``; then the moving bed
+    :func:`~adcpdyn.estimators.correction.adc.dynamic_correction` with its ``timing``; then the moving bed
     the calibration found under this case added back (:meth:`CalibrationRecord.moving_bed_for`).
     Water cells are referenced to the bottom track or to the GNSS (``reference``: ``bt`` | ``gnss``,
     :mod:`adcpdyn.estimators.water`); what was applied (headings, bed, transducer depth) is in the
@@ -70,7 +70,7 @@ def correct_case(case: Case, method: str, calibration: CalibrationRecord | None 
 
     ``calibration``: the typed record (:func:`~adcpdyn.estimators.calibration.record.as_record`
     reads every other form once, where it enters), or None."""
-    from .water import check_reference
+    from ..water import check_reference
 
     check_reference(reference)
     entered = float(case.environment.transducer_depth_m)
@@ -122,7 +122,7 @@ def _true_bed(case: Case) -> tuple[np.ndarray | None, str]:
 
 def _correct(case: Case, method: str, calibration: CalibrationRecord | None, timing: str, reference: str = "bt"):
     from .adc import dynamic_correction, with_heading_misalignment
-    from .asc import asc
+    from ..asc import asc
 
     if method not in CORRECTION_METHODS:
         raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")

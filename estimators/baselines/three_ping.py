@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cases.case import Case
-from ..models.doppler import ratio_from_radial, receive_time_paper, slant_range
-from ..models.motion import evaluate_attitude
-from .attitude_fit import fit_attitude
+from ...cases.case import Case
+from ...models.doppler import ratio_from_radial, receive_time_paper, slant_range
+from ...models.motion import evaluate_attitude
+from ..attitude_fit import fit_attitude
 
 
 @dataclass(frozen=True)

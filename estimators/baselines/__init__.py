@@ -1,0 +1,1 @@
+"""Baselines the joint calibration is measured against: the paper's three-ping solve (three_ping) and Qiao et al.'s installation angles (qiao); the paper's two-stage method is ``CalibrationConfig(method="two-stage")``, a mode of the calibration NLP."""

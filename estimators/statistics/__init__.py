@@ -1,0 +1,1 @@
+"""Statistics of estimates: standard errors and identifiability (uncertainty), coloured-residual sandwiches (hac), the paper's velocity metrics (metrics) and errors against a simulated truth (evaluation)."""
