@@ -305,7 +305,7 @@ def _standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
 
 def _hac_standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
     """Standard errors of the unknowns ``index`` (own units) under coloured residuals: the
-    Newey-West sandwich (:func:`..hac.sandwich`) over time bins of a ping interval, the priors'
+    Newey-West sandwich (:func:`..statistics.hac.sandwich`) over time bins of a ping interval, the priors'
     rows counted by their expected information. An unknown held at a bound is freed for it: its
     SE is then what the data would give it near there (a detection limit's scale)."""
     index = np.asarray(index, dtype=int)
