@@ -372,3 +372,7 @@ def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement(
     assert not significant(dataclasses.replace(s, heldout_z=0.0, shrink_fraction=0.3), 0.05, config, walk=True)
     assert not significant(s, -0.02, config, walk=False)  # knots: the gap floor holds
     assert significant(dataclasses.replace(s, shrink_fraction=0.3), 0.4, config, walk=False)
+    with pytest.raises(ValueError, match="min_gain_walk: expected a held-out excess >= 0"):
+        DiagnosisConfig(min_gain_walk=-0.1)
+    with pytest.raises(ValueError, match="heldout_z_walk: expected a finite"):
+        DiagnosisConfig(heldout_z_walk=float("nan"))

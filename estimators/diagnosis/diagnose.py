@@ -121,6 +121,10 @@ class DiagnosisConfig:
             raise ValueError(f"navigation: expected one of {list(NAVIGATIONS)}, got {self.navigation!r}")
         if self.max_effects < 1:
             raise ValueError(f"max_effects: expected an integer >= 1, got {self.max_effects}")
+        if not np.isfinite(self.heldout_z_walk):
+            raise ValueError(f"heldout_z_walk: expected a finite z threshold, got {self.heldout_z_walk}")
+        if not self.min_gain_walk >= 0:
+            raise ValueError(f"min_gain_walk: expected a held-out excess >= 0, got {self.min_gain_walk}")
 
 
 @dataclass
