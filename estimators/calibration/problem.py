@@ -37,7 +37,7 @@ from ...models.rotations import euler_matrix
 from ...solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..formulations import FORMULATIONS
-from ..statistics.hac import sandwich
+from ..statistics.hac import ping_bins, sandwich
 from ..measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
                                  heading_span, knot_times)
 from ..statistics.uncertainty import uncertainty
@@ -584,8 +584,8 @@ class CalibrationProblem:
         info = {"method": self.config.standard_errors}
         if self.config.standard_errors == "white" or Q.size == 0:
             return white, info
-        bins = {k: float(np.median(np.diff(run.case.pings.time_s))) for k, run in enumerate(self.runs)}
-        sw = sandwich(J, e, unc.cov_z[:, Q], self.model.row_run, self.model.row_time, bins, known=self.model.prior_rows)
+        sw = sandwich(J, e, unc.cov_z[:, Q], self.model.row_run, self.model.row_time,
+                      ping_bins([run.case for run in self.runs]), known=self.model.prior_rows)
         d_w, d_h = np.diag(white), np.diag(sw.cov)
         ratio = np.sqrt(np.where(d_h > 0, np.maximum(1.0, d_w / np.where(d_h > 0, d_h, 1.0)), 1.0))
         cov = ratio[:, None] * sw.cov * ratio[None, :]

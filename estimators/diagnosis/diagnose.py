@@ -42,7 +42,7 @@ from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration.problem import ATTITUDES, choose_attitude
 from ..calibration.record import CalibrationRecord
-from ..statistics.hac import andrews_lags, newey_west, sandwich
+from ..statistics.hac import andrews_lags, newey_west, ping_bins, sandwich
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  knot_times, ping_knots)
 from . import where as where_mod
@@ -324,10 +324,9 @@ def _hac_standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
     used = model.mask > 0
     e = np.where(used, model.weights(fit.sigma) * fit.raw, 0.0)
     prior = np.isin(model.row_sigma, [i for i, k in enumerate(model.sigma_keys) if k[1] in PRIOR_GROUPS])
-    bins = {k: float(np.median(np.diff(r.case.pings.time_s))) for k, r in enumerate(model.base.runs)}
     rows = used | prior
-    H = sandwich(Jc[np.flatnonzero(rows)], e[rows], P_q, model.row_run[rows], model.times[rows], bins,
-                 known=prior[rows])
+    H = sandwich(Jc[np.flatnonzero(rows)], e[rows], P_q, model.row_run[rows], model.times[rows],
+                 ping_bins([r.case for r in model.base.runs]), known=prior[rows])
     return np.sqrt(np.maximum(np.diag(H.cov), 0.0)) * fit.scale[index]
 
 
@@ -592,10 +591,10 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
     hac = _hac_standard_errors(fit, model, idx)
     limits = detection_limits(mine, np.maximum(hac, white), k, n_obs, config.bic_margin)
     # a free unknown's SE under coloured residuals (never below the white one, as the colour factor is at least 1)
-    se = {**{n: float(max(h, w)) if w > 0 else 0.0 for n, h, w in zip(mine, hac, white)},
-          **{n: v * np.sqrt(colour) for n, v in fit.profile_se.items() if n in mine}}
-    limits.update({n: float(v * np.sqrt(colour) * np.sqrt(k * np.log(n_obs) + config.bic_margin))
-                   for n, v in fit.profile_se.items() if n in mine and np.isfinite(v)})
+    profiled = {n: v * np.sqrt(colour) for n, v in fit.profile_se.items() if n in mine}
+    se = {**{n: float(max(h, w)) if w > 0 else 0.0 for n, h, w in zip(mine, hac, white)}, **profiled}
+    finite = [n for n in profiled if np.isfinite(profiled[n])]
+    limits.update(detection_limits(finite, [profiled[n] for n in finite], k, n_obs, config.bic_margin))
     return EffectScore(
         colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
@@ -655,11 +654,11 @@ def _paired_bins(model: GapModel, raw: np.ndarray, ref_model: GapModel, ref_raw:
         names, count = np.unique(group, return_counts=True)
         d = d / (names.size * count[np.searchsorted(names, group)])
     run, t = model.row_run[rows], model.times[rows]
+    widths = ping_bins([r.case for r in model.base.runs])
     out = []
     for r in np.unique(run):
         m = run == r
-        width = float(np.median(np.diff(model.base.runs[r].case.pings.time_s)))
-        b = np.floor((t[m] - t[m].min()) / width).astype(int)
+        b = np.floor((t[m] - t[m].min()) / widths[int(r)]).astype(int)
         out.append(np.bincount(b, weights=d[m])[np.bincount(b) > 0])
     return out
 

@@ -63,6 +63,12 @@ def newey_west(series: np.ndarray, lags: int) -> np.ndarray:
     return M
 
 
+def ping_bins(cases) -> dict:
+    """The time bins of :func:`sandwich` and of per-bin series: each run's median ping interval (s),
+    keyed by the run's index in ``cases``."""
+    return {k: float(np.median(np.diff(case.pings.time_s))) for k, case in enumerate(cases)}
+
+
 def sandwich(J, e: np.ndarray, P_q: np.ndarray, row_run: np.ndarray, row_time: np.ndarray,
              bin_s: dict, known: np.ndarray | None = None) -> Sandwich:
     """HAC covariance of the unknowns Q.
