@@ -116,11 +116,12 @@ def markdown_table(res: dict) -> str:
             r = cell.get((f, n, error, size))
             text = "" if r is None else r["verdict"]
             if r is not None and not r["hit"] and r.get("outcome", "").startswith("under the file's detection limit"):
-                text += f" (under the file's limit {r['detection_limit']:.2g}{' ' + r['unit'] if r['unit'] else ''})"
+                text += (f" (under the file's limit{', over' if r.get('detection_limit_beyond') else ''} "
+                         f"{r['detection_limit']:.2g}{' ' + r['unit'] if r['unit'] else ''})")
             elif r is not None and not r["hit"] and r.get("outcome", "").startswith(("below", "not tried", "outscored", "no gap")):
                 text += f" ({r['outcome'].split(' (')[0].split(':')[0]})"
             if r is not None and "shift_z" in r:  # the file's own effect: its estimate moved, or not
-                text += f" (own {r['expected']} moved {r['shift_z']:.1f} SE)"
+                text += f" (own {r.get('carrier', r['expected'])} moved {r['shift_z']:.1f} SE)"
             row.append(f"**{text}**" if r is not None and r["hit"] and error != "clean" else text)
         lines.append(f"| {error} {size:g} | " + " | ".join(row) + " |")
     return "\n".join(lines)

@@ -317,7 +317,7 @@ def test_field_selftest_diagnoses_on_top_of_the_files_own_effects():
     from adcpdyn.cases.simulation import simulate
     from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig
     from adcpdyn.estimators.diagnosis.field_errors import inject
-    from adcpdyn.estimators.diagnosis.field_selftest import _moved, field_selftest
+    from adcpdyn.estimators.diagnosis.field_selftest import _moved, field_selftest, moved_limit
 
     sc = get_scenario("diag_boat")
     case = inject(simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=40.0)), seed=3),
@@ -329,11 +329,43 @@ def test_field_selftest_diagnoses_on_top_of_the_files_own_effects():
     assert bed["hit"] and bed["verdict"] == "moving_bed"
     assert bed["statement"].startswith("on top of the run's own attitude_latency.delay_s = ")
     own = {"params": {"attitude_latency.delay_s": 0.5}, "params_se": {"attitude_latency.delay_s": 0.01}}
-    assert _moved({"attitude_latency.delay_s": {"value": 0.8, "se": 0.01}}, own, "delay_s", 1.0)["hit"]
-    assert not _moved({"attitude_latency.delay_s": {"value": 0.2, "se": 0.01}}, own, "delay_s", 1.0)["hit"]  # the wrong way
-    assert not _moved({"attitude_latency.delay_s": {"value": 0.51, "se": 0.01}}, own, "delay_s", 1.0)["hit"]  # within noise
+    late = {"delay_s": 1.0}
+    moved = _moved({"attitude_latency.delay_s": {"value": 0.8, "se": 0.01}}, own, late)
+    assert moved["hit"] and moved["size_estimate"] == pytest.approx(0.3) and moved["size_se"] == pytest.approx(0.01 * 2 ** 0.5)
+    assert not _moved({"attitude_latency.delay_s": {"value": 0.2, "se": 0.01}}, own, late)["hit"]  # the wrong way
+    assert not _moved({"attitude_latency.delay_s": {"value": 0.51, "se": 0.01}}, own, late)["hit"]  # within noise
+    assert moved_limit(own, late) == pytest.approx(3 * 0.01 * 2 ** 0.5)
     with pytest.raises(ValueError, match="unknown effect|expected one of"):
         DiagnosisConfig(given=("no_such_effect",))
+
+
+def test_an_own_compass_deviation_tells_an_offset_by_its_signature():
+    """On one course a compass deviation's A trades against B sin psi + C cos psi, so A alone is
+    poorly determined; an offset moves A only, and read along that signature (generalised least
+    squares with the covariance) the shift is told where A's own standard error would hide it.
+    Checked against the closed form: the SE along e = (1, 0, 0) is 1 / sqrt((C^-1)_AA), the
+    conditional SE of A given B and C."""
+    from adcpdyn.estimators.diagnosis.field_selftest import _moved, moved_limit
+
+    rng = np.random.default_rng(1)
+    L = np.array([[1.0, 0, 0], [0.97, 0.2, 0], [-0.95, 0.1, 0.25]])
+    C = 0.08 ** 2 * (L @ L.T)  # rad^2, A strongly correlated with B and C
+    names = ["compass_deviation.A_rad", "compass_deviation.B_rad", "compass_deviation.C_rad"]
+    se = np.sqrt(np.diag(C))
+    clean = {"params": dict(zip(names, rng.normal(0, 0.1, 3))), "params_se": dict(zip(names, se)), "covariance": C}
+    offset = np.radians(4.0)
+    given = {n: {"value": clean["params"][n] + (offset if n.endswith("A_rad") else 0.0), "se": s} for n, s in zip(names, se)}
+    per_deg = {"A_rad": np.radians(1.0)}
+    cov = {"names": names, "matrix": C.tolist()}
+    moved = _moved(given, clean, per_deg, cov)
+    conditional = 1.0 / np.sqrt(np.linalg.inv(2 * C)[0, 0])  # radians, both estimates' covariance
+    assert moved["size_se"] == pytest.approx(np.degrees(conditional), rel=1e-9)
+    assert moved["size_estimate"] == pytest.approx(4.0, rel=1e-9)
+    assert moved["shift_z"] > 3 > offset / np.sqrt(2 * C[0, 0])  # told, though A moved under 3 of its marginal SEs
+    assert moved["hit"]
+    assert moved_limit(clean, per_deg) == pytest.approx(3 * np.degrees(conditional), rel=1e-9)
+    assert not _moved({n: {**v, "value": 2 * clean["params"][n] - v["value"]} for n, v in given.items()}, clean, per_deg,
+                      cov)["hit"]  # the other way
 
 
 def test_field_selftest_says_why_an_error_was_not_named():

@@ -178,6 +178,7 @@ class DiagnosisResult:
     velocity_error_after_m_s: float | None
     selected: list = field(default_factory=list)
     given: dict = field(default_factory=dict)  # the given effects' unknowns: {name: {"value", "se"}}
+    given_covariance: dict = field(default_factory=dict)  # {"names": [...], "matrix": [[...]]} of the given unknowns
     confounded: list = field(default_factory=list)
     alternatives: list = field(default_factory=list)  # per chosen effect: the others of its round nearly as good
     runs: list = field(default_factory=list)
@@ -307,27 +308,53 @@ def _standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
     return np.sqrt(np.maximum(np.diag(_covariance(fit, model, index)), 0)) * fit.scale[index]
 
 
-def _hac_standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
-    """Standard errors of the unknowns ``index`` (own units) under coloured residuals: the
-    Newey-West sandwich (:func:`..statistics.hac.sandwich`) over time bins of a ping interval, the priors'
+def _hac_covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
+    """Covariance of the unknowns ``index`` (own units) under coloured residuals: the Newey-West
+    sandwich (:func:`..statistics.hac.sandwich`) over time bins of a ping interval, the priors'
     rows counted by their expected information. An unknown held at a bound is freed for it: its
-    SE is then what the data would give it near there (a detection limit's scale)."""
+    variance is then what the data would give it near there (a detection limit's scale)."""
     index = np.asarray(index, dtype=int)
     if index.size == 0:
-        return np.zeros(0)
+        return np.zeros((0, 0))
     J = as_sparse(fit.jacobian)
     free = np.ones(J.shape[1], dtype=bool) if fit.free is None else fit.free.astype(bool).copy()
     free[index] = True
     cols = np.flatnonzero(free)
-    Jc = J[:, cols]
-    P_q = inverse_columns(Jc, np.searchsorted(cols, index))
+    scale = fit.scale[index]
+    return hac_of_columns(J[:, cols], np.searchsorted(cols, index), model, fit) * np.outer(scale, scale)
+
+
+def hac_of_columns(J, q, model: GapModel, fit: Fit) -> np.ndarray:
+    """The HAC covariance of columns ``q`` of the weighted-residual Jacobian ``J`` (the model's rows,
+    any columns: the fit's free unknowns, or those and a signature), at the fit's residuals."""
+    P_q = inverse_columns(J, q)
     used = model.mask > 0
     e = np.where(used, model.weights(fit.sigma) * fit.raw, 0.0)
     prior = np.isin(model.row_sigma, [i for i, k in enumerate(model.sigma_keys) if k[1] in PRIOR_GROUPS])
     rows = used | prior
-    H = sandwich(Jc[np.flatnonzero(rows)], e[rows], P_q, model.row_run[rows], model.times[rows],
-                 ping_bins([r.case for r in model.base.runs]), known=prior[rows])
-    return np.sqrt(np.maximum(np.diag(H.cov), 0.0)) * fit.scale[index]
+    return sandwich(as_sparse(J)[np.flatnonzero(rows)], e[rows], P_q, model.row_run[rows], model.times[rows],
+                    ping_bins([r.case for r in model.base.runs]), known=prior[rows]).cov
+
+
+def _hac_standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
+    """Standard errors of the unknowns ``index`` (own units) under coloured residuals (:func:`_hac_covariance`)."""
+    return np.sqrt(np.maximum(np.diag(_hac_covariance(fit, model, index)), 0.0))
+
+
+def coloured_covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
+    """Covariance of the unknowns ``index`` (own units) an estimate is reported with: the HAC one's
+    correlations, each variance at least the white one (coloured residuals never make an unknown
+    better determined than white ones would)."""
+    hac = _hac_covariance(fit, model, index)
+    white = _standard_errors(fit, model, index)
+    sd = np.sqrt(np.maximum(np.diag(hac), 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        stretch = np.where(sd > 0, np.maximum(white / np.where(sd > 0, sd, 1.0), 1.0), 1.0)
+    out = hac * np.outer(stretch, stretch)
+    missing = sd == 0  # no HAC information (a pinned unknown): the white variance alone
+    out[missing, :] = out[:, missing] = 0.0
+    out[missing, missing] = white[missing] ** 2
+    return out
 
 
 def detection_limits(names: list, se_hac: np.ndarray, n_params: int, n_obs: int, bic_margin: float) -> dict:
@@ -737,7 +764,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     selected_terms, selected, confounded, ranking, alternatives = [], [], [], [], []
     current_name, current = "base", (base_model, base_fit)
     cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
-    given = {}
+    given, given_covariance = {}, {}
     if config.given:  # the run's own effects first: every candidate is then judged on top of them
         for name in config.given:
             current = refit(selected_terms, name, current[1])
@@ -754,8 +781,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         cv[current_name] = _cv_residuals(*current, config.cv_folds, config.cv_block_s)
         gm, gf = current
         idx = [gm.names.index(n) for n in gm.effect_names]
-        given = {n: {"value": float(gf.x[i]), "se": float(gf.profile_se.get(n, e))}
-                 for n, i, e in zip(gm.effect_names, idx, _standard_errors(gf, gm, idx))}
+        cov = coloured_covariance(gf, gm, idx)
+        given = {n: {"value": float(gf.x[i]), "se": float(gf.profile_se.get(n, np.sqrt(cov[j, j])))}
+                 for j, (n, i) in enumerate(zip(gm.effect_names, idx))}
+        # how the given unknowns co-vary (a compass deviation's A, B, C on one course): what a shift of them is judged by
+        given_covariance = {"names": list(gm.effect_names), "matrix": cov.tolist()}
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
     walk = base_model.random_walk  # a velocity per ping: coloured-residual BIC, smaller shrink share
 
@@ -898,6 +928,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         remaining_gap_significant=bool(remaining), where=where, ranking=[r.to_dict() for r in ranking],
         noise={_key_name(base_model, k): v for k, v in noise.items()}, base=base_info,
         velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, given=given,
+        given_covariance=given_covariance,
         confounded=confounded,
         alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)

@@ -32,10 +32,9 @@ LIMIT_PARAMETERS = {  # error -> (the effect's unknowns whose detection limit bo
     "reference_latency_s": (("delay_s",), 1.0), "sound_speed_relative": (("relative_error",), 1.0),
     # the bed is injected across the mean course, in an unknown mix of north and east: the harder of the two
     "moving_bed_m_s": (("velocity_north_m_s", "velocity_east_m_s"), 1.0),
-    # none for heave: its limit depends on the frequency, and the clean fit's is not the injected one; none for
-    # the tilt low-pass: its linearisation at tau = 0 moves the tilts only, while undoing the filter also moves
-    # their rates by tau y'' (the second derivative of noisy samples), which the likelihood pays for (RiverPro,
-    # 1.5 s injected: the marginal log-likelihood falls from 677 at tau 0 to 657 at 1.5 s): it would be optimistic
+    # heave and the tilt low-pass have none here: heave's depends on its frequency, and the low-pass's linearisation
+    # at tau = 0 moves the tilts only, while undoing the filter also moves their rates by tau y'' (noisy samples'
+    # second derivative); both get the limit of their forward signature instead (:mod:`.signal_limit`)
 }
 
 
@@ -49,6 +48,24 @@ def detection_limit(error: str, limits: dict) -> float | None:
     found = [v for k, v in limits.items() if k.rsplit(".", 1)[-1] in names and np.isfinite(v)]
     return float(max(found) * factor) if found else None
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
+
+
+def shift_signature(case: Case, error: str) -> dict:
+    """How one unit of ``error`` (its unit) as :func:`inject` writes it moves its catalog effect's
+    unknowns (unknown -> change per unit): a compass offset only the constant term A (a compass
+    deviation's B and C stay), a bed across the mean course its north and east components."""
+    if error == "moving_bed_m_s":
+        course = _mean_course(case)
+        return {"velocity_north_m_s": float(np.cos(course - np.pi / 2)), "velocity_east_m_s": float(np.sin(course - np.pi / 2))}
+    if error not in SHIFTED_PARAMETER:
+        return {}
+    parameter, sign = SHIFTED_PARAMETER[error]
+    return {parameter: sign / LIMIT_PARAMETERS.get(error, ((), 1.0))[1]}
+
+
+def _mean_course(case: Case) -> float:
+    v = case.reference.velocity_m_s
+    return float(np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0])))
 
 
 def inject(case: Case, error: str, size: float) -> Case:
@@ -94,7 +111,7 @@ def inject(case: Case, error: str, size: float) -> Case:
     if error == "reference_latency_s":
         return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
-    course = np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0]))
+    course = _mean_course(case)
     u = size * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0])
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
 

@@ -15,7 +15,8 @@ from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
 from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, diagnose
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, SHIFTED_PARAMETER, detection_limit, has_moving_reference, inject
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, has_moving_reference, inject, shift_signature
+from .signal_limit import signal_limit
 
 
 def field_selftest(case: Case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
@@ -32,7 +33,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
     moving = has_moving_reference(case)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
-    rows, own, own_values, limits = [], (), {}, {}
+    rows, own, own_values, limits, beyond = [], (), {}, {}, {}
     for error, size in trials:
         run = case if error == "clean" else inject(case, error, size)
         tic = time.perf_counter()
@@ -49,6 +50,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
                "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
                "seconds": seconds, "statement": r.statement}
         row["detection_limit"] = limits.get(error)
+        row["detection_limit_beyond"] = beyond.get(error, False)  # not even the largest size searched shows
         row["outcome"] = outcome(row, mine, r, config.min_gap)
         if error == "clean":
             row["verdict"] = "+".join(own) or "none"
@@ -56,12 +58,26 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
             first = {sc["effect"]: sc for sc in r.ranking if sc["round"] == 1}
             limits = {e: detection_limit(e, first[spec[0]]["detection_limit"]) if spec[0] in first else None
                       for e, spec in FIELD_ERRORS.items()}
+            # what the file could show of each error at best (its forward signature): where it asks for more than
+            # the effect's own linearised limit, or the effect has none (tilt low-pass, heave), it is the limit
+            signal = {e: signal_limit(*r.fits["base"], case, e, config, calibration)
+                      for e in dict.fromkeys(e for e, _ in trials[1:])}
+            for e, sl in signal.items():
+                if sl is not None and (limits.get(e) is None or sl["size"] > limits[e]):
+                    limits[e] = sl["size"]
+                    beyond[e] = sl["beyond"]
+            row["signal_limits"] = signal
+            for e, spec in FIELD_ERRORS.items():  # an error the file's own effects carry: what moving them takes
+                if (mover := carrier(spec[0], own)) and (limit := moved_limit(own_values[mover], shift_signature(case, e))):
+                    limits[e], beyond[e] = limit, False
             row["detection_limits"] = limits
             row["own_effects"] = list(own)
         elif mover := carrier(expected, own):  # the file carries it already: named when its estimate moves its way
             row.update(_moved({k: v for k, v in r.given.items() if k.split("/")[-1].startswith(mover + ".")},
-                              own_values[mover], *SHIFTED_PARAMETER.get(error, (None, 0.0))))
-            row["outcome"] = f"own effect, estimate moved {row['shift_z']:.1f} SE" + ("" if row["hit"] else " (not named)")
+                              own_values[mover], shift_signature(case, error), r.given_covariance), carrier=mover)
+            row["outcome"] = (f"own effect, estimate moved {row['shift_z']:.1f} SE" + ("" if row["hit"] else " (not named)")
+                              + ("" if row["size_estimate"] is None else
+                                 f"; size from the shift {row['size_estimate']:.3g} +- {row['size_se']:.2g}"))
         rows.append(row)
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
@@ -89,6 +105,9 @@ def _own_effects(case: Case, config: DiagnosisConfig, calibration, first) -> tup
         key = name.split("/")[-1]
         entry = values.setdefault(key.split(".")[0], {"params": {}, "params_se": {}})
         entry["params"][key], entry["params_se"][key] = v["value"], v["se"]
+    for entry in values.values():
+        full = [n for n in r.given if n.split("/")[-1] in entry["params"]]
+        entry["covariance"] = _covariance_of(r.given_covariance, full, [r.given[n]["se"] for n in full])
     return own, values
 
 
@@ -118,6 +137,8 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     limit = row.get("detection_limit")
     if not mine["significant"] and limit is not None and row["size"] < limit:
         unit = f" {row['unit']}" if row["unit"] else ""
+        if row.get("detection_limit_beyond"):
+            return f"under the file's detection limit ({row['size']:g}{unit}: not even {limit:.3g}{unit} shows on this file; {detail})"
         return f"under the file's detection limit ({row['size']:g} < {limit:.3g}{unit}; {detail})"
     if not mine["significant"] and result.gap_before <= min_gap:
         return f"no gap to explain (held-out excess {result.gap_before:.2f}; {detail})"
@@ -126,21 +147,67 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     return f"outscored by {row['verdict'].split('+')[0]} ({detail})"
 
 
-def _moved(given: dict, clean: dict, parameter: str | None, sign: float) -> dict:
-    """An injected error of an effect the clean file carries: its unknowns' shift from the clean
-    file's estimates in combined standard errors; named when one moved beyond 3 of them, and the
-    error's own ``parameter`` (if it has one) moved the error's way (``sign``)."""
-    shifts, z, right_way = {}, 0.0, parameter is None
-    for name, v in given.items():
-        key = name.split("/")[-1]
-        if key in clean["params"]:
-            d = v["value"] - clean["params"][key]
-            se = float(np.hypot(v["se"], clean["params_se"].get(key, 0.0)))
-            shifts[key] = d
-            z = max(z, abs(d) / se if se > 0 else 0.0)
-            right_way = right_way or (key.endswith("." + parameter) and d * sign > 0)
-    return {"hit": bool(z > 3.0 and right_way), "estimate": {k: v["value"] for k, v in given.items()},
-            "se": {k: v["se"] for k, v in given.items()}, "shift_from_clean": shifts, "shift_z": z}
+MOVED_Z = 3.0  # an own effect's estimate moved this many standard errors the error's way: the error is told
+
+
+def _covariance_of(covariance: dict | None, names: list, se: list) -> np.ndarray:
+    """The covariance of ``names`` with standard errors ``se``: correlations from ``covariance``
+    ({"names", "matrix"}, a diagnosis's ``given_covariance``) where it holds them all, else none."""
+    se = np.asarray(se, dtype=float)
+    corr = np.eye(len(names))
+    if covariance and all(n in covariance.get("names", []) for n in names):
+        i = [covariance["names"].index(n) for n in names]
+        M = np.asarray(covariance["matrix"], dtype=float)[np.ix_(i, i)]
+        sd = np.sqrt(np.maximum(np.diag(M), 0.0))
+        ok = sd > 0
+        corr[np.ix_(ok, ok)] = M[np.ix_(ok, ok)] / np.outer(sd[ok], sd[ok])
+    return corr * np.outer(se, se)
+
+
+def _along(C: np.ndarray, e: np.ndarray) -> float:
+    """The standard error of a size estimated along signature ``e`` from unknowns of covariance ``C``
+    (generalised least squares: 1 / sqrt(e' C^-1 e)); inf when ``e`` is empty or not determined."""
+    info = float(e @ np.linalg.pinv(C) @ e) if e.any() else 0.0
+    return 1.0 / np.sqrt(info) if info > 0 else np.inf
+
+
+def moved_limit(clean: dict, signature: dict) -> float | None:
+    """The smallest error :func:`_moved` names on a file whose own effect carries it: MOVED_Z
+    standard errors of the size read from the shift, the clean and the injected estimates
+    counted as independent (sqrt 2 of the clean one's); None without a signature."""
+    keys = list(clean["params"])
+    e = np.array([signature.get(k.rsplit(".", 1)[-1], 0.0) for k in keys])
+    C = clean.get("covariance")
+    C = np.diag([clean["params_se"][k] ** 2 for k in keys]) if C is None else np.asarray(C)
+    se = _along(C, e)
+    return float(MOVED_Z * np.sqrt(2.0) * se) if np.isfinite(se) else None
+
+
+def _moved(given: dict, clean: dict, signature: dict, covariance: dict | None = None) -> dict:
+    """An injected error of an effect the clean file carries: the shift of its unknowns from the clean
+    file's estimates, read as a size of the error along its ``signature`` (unknown suffix -> change
+    per unit, :func:`.field_errors.shift_signature`) by generalised least squares with the two
+    estimates' covariances summed (a compass offset moves a deviation's A alone, so A's share that B
+    and C stand in for on one course does not hide it); named when that size is beyond MOVED_Z of
+    its standard errors the error's way. Without a signature, the largest single shift in its own
+    standard errors (either way) is reported and nothing is named."""
+    names = [n for n in given if n.split("/")[-1] in clean["params"]]
+    keys = [n.split("/")[-1] for n in names]
+    d = np.array([given[n]["value"] - clean["params"][k] for n, k in zip(names, keys)])
+    C = _covariance_of(covariance, names, [given[n]["se"] for n in names])
+    C_clean = clean.get("covariance")
+    C = C + (np.diag([clean["params_se"][k] ** 2 for k in keys]) if C_clean is None else np.asarray(C_clean))
+    e = np.array([signature.get(k.rsplit(".", 1)[-1], 0.0) for k in keys])
+    se = _along(C, e)
+    if np.isfinite(se):
+        size = float(se ** 2 * (e @ np.linalg.pinv(C) @ d))
+        z = size / se
+    else:
+        size, sd = None, np.sqrt(np.maximum(np.diag(C), 0.0))
+        z = float(np.max(np.abs(d) / np.where(sd > 0, sd, np.inf), initial=0.0))
+    return {"hit": bool(size is not None and z > MOVED_Z), "estimate": {k: v["value"] for k, v in given.items()},
+            "se": {k: v["se"] for k, v in given.items()}, "shift_from_clean": dict(zip(keys, d.tolist())),
+            "shift_z": float(z), "size_estimate": size, "size_se": float(se) if size is not None else None}
 
 
 def summarise(rows: list) -> dict:
@@ -151,7 +218,7 @@ def summarise(rows: list) -> dict:
     clean = [r for r in rows if r["error"] == "clean"]
     injected = [r for r in rows if r["error"] != "clean"]
     # detectable: at or above the file's detection limit, computed on the clean run before any injection; an
-    # error without a limit (heave, tilt low-pass: none claimed) counts as detectable, so a miss there still counts
+    # error without a limit (none could be computed) counts as detectable, so a miss there still counts
     detectable = [r for r in injected if r.get("detection_limit") is None or r["size"] >= r["detection_limit"]]
     return {
         "top1": float(np.mean([r["hit"] for r in injected])) if injected else None,
@@ -165,6 +232,7 @@ def summarise(rows: list) -> dict:
                           # one file's limit (rows of several files, a bench, have several: None here)
                           "detection_limit": rs[0].get("detection_limit")
                           if len({r.get("detection_limit") for r in rs}) == 1 else None,
+                          "detection_limit_beyond": bool(rs[0].get("detection_limit_beyond", False)),
                           "unit": rs[0]["unit"]} for e, rs in per.items()},
     }
 
@@ -194,7 +262,8 @@ def format_field_selftest(res: dict) -> str:
                  f"file's detection limit: {100 * (s['top1_detectable'] or 0):.0f} %")
     for e, v in s["per_error"].items():
         smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}"
-        limit = "unknown" if v.get("detection_limit") is None else f"{v['detection_limit']:.3g} {v['unit']}"
+        limit = "unknown" if v.get("detection_limit") is None else \
+            f"{'over ' if v.get('detection_limit_beyond') else ''}{v['detection_limit']:.3g} {v['unit']}"
         lines.append(f"- {e}: top-1 {100 * v['top1']:.0f} %, smallest detected {smallest}, detection limit {limit}")
     for e in res.get("skipped", []):
         lines.append(f"- {e}: not tried (needs a moving reference velocity)")

@@ -1,0 +1,79 @@
+"""What a recorded file could show of a field error at best: the residuals the error writes
+(injected forward on the recorded channels, :mod:`.field_errors`), off everything the base's
+unknowns absorb (the per-ping velocities included), against the noise under coloured residuals.
+Its smallest detectable size bounds every detector's, the catalog effect's included: an error
+under it is one this file cannot show, whatever model is fitted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ...cases.case import Case
+from ...models.effects import get_effect
+from .diagnose import DiagnosisConfig, base_from, hac_of_columns
+from .field_errors import FIELD_ERRORS, inject
+from .model import Fit, GapModel, free_jacobian
+from .normal_equations import as_sparse, inverse_columns
+
+SEARCH = (1.0 / 16.0, 4.0)  # sizes searched: from the smallest typical one over 16 to the largest times 4
+BISECTIONS = 10
+
+
+def signal_statistic(model: GapModel, fit: Fit, case: Case, error: str, size: float, config: DiagnosisConfig,
+                     calibration=None) -> tuple | None:
+    """(noncentrality, colour inflation) of ``error`` at ``size`` written into ``case``, on the base
+    ``model`` fitted as ``fit``: lambda = d'(I - H)d, d the weighted residuals' change at the fit's
+    unknowns, H the hat matrix of its free unknowns (lambda is 2 x the log-likelihood a model that
+    reproduced the error exactly would gain, to first order); the inflation is the HAC variance of
+    that model's size over its white one. None when the injected case makes a different model
+    (another attitude source, other rows)."""
+    other = GapModel(base_from([inject(case, error, size)], config, calibration), solver=config.solver)
+    if other.names != model.names or other.mask.shape != model.mask.shape:
+        return None
+    z, w = fit.x / fit.scale, model.weights(fit.sigma)
+    same = (other.mask > 0) == (model.mask > 0)
+    d = np.asarray(other.residual_fun(z, w)[0]).ravel() - np.asarray(model.residual_fun(z, w)[0]).ravel()
+    d = np.nan_to_num(np.where(same, d, 0.0))
+    if not np.any(d):
+        return 0.0, 1.0
+    J, _ = free_jacobian(fit)
+    Ja = sp.hstack([as_sparse(J), sp.csr_matrix(d[:, None])]).tocsr()
+    last = Ja.shape[1] - 1
+    white = float(inverse_columns(Ja, [last])[last, 0])
+    if not white > 0:
+        return 0.0, 1.0
+    hac = float(hac_of_columns(Ja, [last], model, fit)[0, 0])
+    return 1.0 / white, max(hac / white, 1.0)
+
+
+def signal_limit(model: GapModel, fit: Fit, case: Case, error: str, config: DiagnosisConfig, calibration=None) -> dict | None:
+    """The smallest size of ``error`` whose signature passes the selection's coloured BIC bar
+    (lambda / inflation > k log n + margin, k the catalog effect's unknowns), by bisection in log
+    size over :data:`SEARCH` around the error's typical sizes: {"size", "beyond": True when not
+    even the largest searched size passes, "below": True when the smallest already does}; None
+    where the injected case makes another model."""
+    typical = FIELD_ERRORS[error][2]
+    k = len(get_effect(FIELD_ERRORS[error][0]).parameters)
+    bar = k * np.log(int((model.mask > 0).sum())) + config.bic_margin
+
+    def passes(size):
+        stat = signal_statistic(model, fit, case, error, size, config, calibration)
+        return None if stat is None else stat[0] / stat[1] > bar
+
+    lo, hi = min(typical) * SEARCH[0], max(typical) * SEARCH[1]
+    top = passes(hi)
+    if top is None:
+        return None
+    if not top:
+        return {"size": float(hi), "beyond": True, "below": False}
+    if passes(lo):
+        return {"size": float(lo), "beyond": False, "below": True}
+    for _ in range(BISECTIONS):
+        mid = np.sqrt(lo * hi)
+        ok = passes(mid)
+        if ok is None:
+            return None
+        lo, hi = (lo, mid) if ok else (mid, hi)
+    return {"size": float(hi), "beyond": False, "below": False}
