@@ -201,9 +201,11 @@ class RowJacobian:
         G = np.zeros((self.n_z, self.n_z))
         for _, sc, shared, knot_part in self._parts(z, w):
             G[np.ix_(sc, sc)] += shared.T @ shared
-            if knot_part is not None:
-                cross = knot_part.T @ shared  # (n_z, n_shared_cols), zero on the shared rows
-                G[:, sc] += cross
-                G[sc, :] += cross.T
-                G += (knot_part.T @ knot_part).toarray()
+            if knot_part is not None:  # on the block's own knot columns only: a survey's other runs' stay untouched
+                kc = np.unique(knot_part.indices)
+                kp = knot_part[:, kc]
+                cross = np.asarray(kp.T @ shared)  # (knot cols, shared cols)
+                G[np.ix_(kc, sc)] += cross
+                G[np.ix_(sc, kc)] += cross.T
+                G[np.ix_(kc, kc)] += (kp.T @ kp).toarray()
         return G

@@ -449,7 +449,7 @@ class CalibrationProblem:
         w = self.weights()
         e = np.asarray(self.residual_fun(ms.x, w)[0]).ravel()
         J = self.jacobian_fun(ms.x, w)
-        J = J.toarray() if self.assembled else np.asarray(J)
+        J = J.tocsr() if self.assembled else np.asarray(J)  # an assembled one stays sparse (rows x unknowns)
         r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))

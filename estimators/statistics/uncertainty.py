@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.linalg import null_space, orth
 
 RANK_RTOL = 1e-10
@@ -83,13 +84,14 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
 
     Parameters
     ----------
-    J : (m, n) Jacobian of the noise-weighted residuals w.r.t. the scaled variables z.
+    J : (m, n) Jacobian of the noise-weighted residuals w.r.t. the scaled variables z (dense or scipy sparse).
     A : (q, n) Jacobian of the equality constraints, or None.
     names : variable names; scale : (n,) variable scales (x = scale * z).
     """
     n = J.shape[1]
     Z = null_space(A) if A is not None and A.size else np.eye(n)
-    F = Z.T @ (J.T @ J) @ Z
+    G = J.T @ J  # sparse for an assembled Jacobian: a survey's is block-sparse, never densified (m x n)
+    F = Z.T @ (G.toarray() if sp.issparse(G) else G) @ Z
     # Numerical rank on the Jacobi-equilibrated F (unit diagonal): one near-exact channel (a
     # noise-free heading, information ~1e14) must not push ordinary directions below a
     # threshold relative to the largest eigenvalue.
