@@ -9,14 +9,13 @@ reports its one-line error and does not stop the others.
 from __future__ import annotations
 
 import json
-import logging
-import os
 import time
 from dataclasses import dataclass
 
 from .estimators.calibration.problem import CalibrationConfig
+from .solvers.cluster import LOCAL, SERIAL, check_address, dask_client
 
-LOCAL, SERIAL, AUTO = "local", "none", "auto"
+AUTO = "auto"
 IN_PROCESS_MAX_JOBS = 2  # auto: a LocalCluster costs seconds to start; one or two cases run here
 
 
@@ -88,14 +87,7 @@ def run_job(job) -> dict:
 
 def check_scheduler(scheduler: str) -> str:
     """``auto``, ``local``, ``none`` or a scheduler address (``tcp://host:port`` or ``host:port``)."""
-    if scheduler in (AUTO, LOCAL, SERIAL):
-        return scheduler
-    address = scheduler.split("://", 1)[-1]
-    host, _, port = address.rpartition(":")
-    if not host or not port.isdigit():
-        raise ValueError(f"--scheduler: expected {AUTO!r}, {LOCAL!r}, {SERIAL!r} or an address like "
-                         f"tcp://127.0.0.1:8786, got {scheduler!r}")
-    return scheduler
+    return check_address(scheduler, "--scheduler", extra=(AUTO,))
 
 
 def resolve_scheduler(scheduler: str, n_jobs: int) -> str:
@@ -143,26 +135,17 @@ def run_batch(jobs, scheduler: str = AUTO, n_workers: int | None = None, progres
                 out.append(run_job(job))
                 bar.update()
         return out
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import as_completed
 
-    cluster = None
-    if scheduler == LOCAL:
-        n = max(1, min(n_workers or os.cpu_count() or 1, len(jobs)))
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
-    try:
-        with Client(cluster if cluster is not None else scheduler, timeout="15s") as client:
-            futures = client.map(run_job, jobs, pure=False)
-            order = {f.key: i for i, f in enumerate(futures)}
-            out: list = [None] * len(jobs)
-            with _bar(len(jobs), progress) as bar:
-                for f in as_completed(futures):
-                    out[order[f.key]] = f.result()
-                    bar.update()
-            return out
-    finally:
-        if cluster is not None:
-            cluster.close()
+    with dask_client(scheduler, n_workers, max_workers=len(jobs)) as client:
+        futures = client.map(run_job, jobs, pure=False)
+        order = {f.key: i for i, f in enumerate(futures)}
+        out: list = [None] * len(jobs)
+        with _bar(len(jobs), progress) as bar:
+            for f in as_completed(futures):
+                out[order[f.key]] = f.result()
+                bar.update()
+        return out
 
 
 def write_summary(rows: list[dict], path) -> None:

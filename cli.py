@@ -353,7 +353,9 @@ def cmd_compare(args) -> int:
     return 0
 
 
-def _calibration_config(args, formulation=None):
+def _calibration_config(args, formulation=None, one=True):
+    """The CalibrationConfig of the flags; ``one``: a single calibration, whose starts go where
+    --scheduler/--workers say (with many cases those flags place the cases, each solved in its worker)."""
     from .estimators.calibration.problem import CalibrationConfig
 
     if args.bed_knots is not None and args.moving_bed != "section":
@@ -362,7 +364,12 @@ def _calibration_config(args, formulation=None):
     from .solvers.multistart import SolverOptions
 
     declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
-    return CalibrationConfig(formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
+    # one calibration (one run, or --joint): --scheduler says where its starts are solved (auto: here)
+    scheduler = getattr(args, "scheduler", "auto") if one else "none"
+    placement = {"scheduler": "none" if scheduler == "auto" else scheduler}
+    if one and getattr(args, "workers", None):
+        placement["workers"] = args.workers
+    return CalibrationConfig(**placement, formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
                              jacobian=args.jacobian, attitude=args.attitude, moving_bed=args.moving_bed,
                              moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
@@ -432,7 +439,7 @@ def cmd_calibrate(args) -> int:
         from .batch import CalibrateJob, check_scheduler
 
         check_scheduler(args.scheduler)
-        config = _calibration_config(args)
+        config = _calibration_config(args, one=False)
         paths, out = collect_case_paths(args.case), _batch_out(args)
         jobs = [CalibrateJob(str(p), str((out / f"{p.stem}.json").resolve()), config) for p in paths]
         return _run_batch(args, jobs, [("objective", "objective", 12, "{:.6g}".format),
@@ -443,6 +450,9 @@ def cmd_calibrate(args) -> int:
                          "is the one-NLP calibration of several runs (drop one of them)")
     if Path(args.out).suffix.lower() != ".json":
         raise ValueError(f"--out: expected a CALIB.json file name ending in .json (calibrate writes JSON), got {args.out!r}")
+    from .batch import check_scheduler
+
+    check_scheduler(args.scheduler)  # in the user's flag's words, before the config's own check
     paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
     check_output_file(args.out, *paths)
     config = _calibration_config(args)
@@ -750,9 +760,11 @@ def build_parser() -> argparse.ArgumentParser:
     def batch_options(s):
         s.add_argument("--scheduler", default="auto",
                        help="many cases: auto (in this process for 1-2 cases, else a Dask LocalCluster), local (a "
-                            "LocalCluster), none (one after another here) or a scheduler address tcp://HOST:PORT")
+                            "LocalCluster), none (one after another here) or a scheduler address tcp://HOST:PORT; "
+                            "calibrate of one case or --joint: where its starts are solved (auto: here)")
         s.add_argument("--workers", type=_count, default=None, help="many cases: LocalCluster worker processes "
-                       "(default: one per CPU, at most one per case)")
+                       "(default: one per CPU, at most one per case); one calibration: threads here, or "
+                       "LocalCluster processes with --scheduler local")
 
     s = command("correct", "correct every ping of a case (or of many: files, a folder or a glob)", cmd_correct)
     s.add_argument("case", nargs="+", help="case file(s), folder(s) or glob pattern(s)")

@@ -230,6 +230,19 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
         (``lam_x0``, ``lam_g0``); the solver must be built with IPOPT's warm start.
     """
     x0s = np.atleast_2d(np.asarray(x0s, dtype=float))
+    done = run_starts(solver, x0s, lbx, ubx, lbg, ubg, p, progress=progress, workers=workers, make_solver=make_solver,
+                      warm_start=warm_start)
+    return combine_starts(done, x0s.shape[1], objective_rtol, x_scale)
+
+
+def run_starts(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, progress: bool | None = None, workers: int = 1,
+               make_solver=None, warm_start: bool = False, indices=None) -> list:
+    """Solve from every row of ``x0s`` (the options of :func:`multistart`): per start its record
+    (index, objective, iterations, time, status, success; ``indices`` names the rows, default
+    0, 1, ...) and its solution (x, lam_g, g, lam_x), for :func:`combine_starts`. Starts solved
+    elsewhere (a Dask worker's share) combine the same way."""
+    x0s = np.atleast_2d(np.asarray(x0s, dtype=float))
+    names = np.arange(x0s.shape[0]) if indices is None else np.asarray(indices, dtype=int)
     if progress is None:
         from ..progress import progress_bar_enabled
 
@@ -246,7 +259,7 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
             sol = s(x0=x0s[i], lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p, **warm)
         except RuntimeError as err:  # the solver stopped with an error: a failed start, reported as such
             n_g = np.size(lbg)
-            record = dict(index=i, objective=np.inf, iterations=-1, time_s=time.perf_counter() - tic,
+            record = dict(index=int(names[i]), objective=np.inf, iterations=-1, time_s=time.perf_counter() - tic,
                           status=f"error: {_casadi_error(err)}", success=False)
             return record, (x0s[i].copy(), np.full(n_g, np.nan), np.full(n_g, np.nan), np.full(x0s.shape[1], np.nan))
         elapsed = time.perf_counter() - tic
@@ -256,7 +269,7 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
             stats = {"return_status": f"no statistics: {_casadi_error(err)}", "success": False}
         status = stats.get("return_status", stats.get("unified_return_status", "unknown"))
         f = float(sol["f"])
-        record = dict(index=i, objective=f if np.isfinite(f) else np.inf, iterations=int(stats.get("iter_count", -1)),
+        record = dict(index=int(names[i]), objective=f if np.isfinite(f) else np.inf, iterations=int(stats.get("iter_count", -1)),
                       time_s=elapsed, status=str(status), success=bool(stats.get("success", False)))
         return record, (np.asarray(sol["x"]).ravel(), np.asarray(sol["lam_g"]).ravel(), np.asarray(sol["g"]).ravel(),
                         np.asarray(sol["lam_x"]).ravel())
@@ -287,6 +300,12 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
             with ThreadPoolExecutor(workers) as pool:
                 futures = [pool.submit(task, i) for i in todo]
                 done = first + [f.result() for f in _progress(as_completed(futures), len(todo), progress)]
+    return done
+
+
+def combine_starts(done: list, n_x: int, objective_rtol: float = 1e-6, x_scale=None) -> MultistartResult:
+    """The best of the starts ``done`` (:func:`run_starts`' records and solutions, from one process or
+    several), every start's record with its group of agreeing solutions."""
     done.sort(key=lambda item: item[0]["index"])
     records = [d[0] for d in done]
     sols = [d[1] for d in done]
@@ -296,7 +315,7 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
     # Prefer successful starts; a failed start only wins if nothing converged.
     order = np.lexsort((objectives, ~ok))
     best = int(order[0])
-    scale = np.ones(x0s.shape[1]) if x_scale is None else np.asarray(x_scale, dtype=float)
+    scale = np.ones(n_x) if x_scale is None else np.asarray(x_scale, dtype=float)
     groups: list[tuple[float, np.ndarray]] = []
     for i in order:
         f, x = objectives[i], sols[i][0] / scale

@@ -34,6 +34,7 @@ from ...cases.case import Case
 from ...cases.identity import identity_of, instrument_difference, site_differences, site_of
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ...models.rotations import euler_matrix
+from ...solvers.cluster import SERIAL, check_address
 from ...solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..formulations import FORMULATIONS
@@ -140,6 +141,10 @@ class CalibrationConfig:
     magnetic_declination_rad : float, optional
         Declination at the site (east positive), when known; CALIB.json then reports the
         compass error (misalignment minus declination).
+    scheduler : str
+        Where the starts are solved: ``none`` (this process, ``workers`` threads), ``local`` (a
+        Dask LocalCluster of ``workers`` single-threaded processes) or a Dask scheduler's address
+        (``tcp://host:port``); each worker builds the problem itself (:mod:`.distributed`).
     jacobian : str
         Residual Jacobian (Gauss-Newton Hessian, standard errors): ``symbolic`` (the whole
         problem expanded to SX and differentiated by CasADi), ``assembled`` (per-row
@@ -164,6 +169,7 @@ class CalibrationConfig:
     epsilon_rel: float = 0.05
     use_ranges: bool = True
     workers: int = 2
+    scheduler: str = SERIAL
     attitude: str = "auto"
     jacobian: str = "auto"
     moving_bed: str = "auto"
@@ -191,6 +197,7 @@ class CalibrationConfig:
                              f"got {self.magnetic_declination_rad!r}")
         if int(self.n_starts) < 1:
             raise ValueError(f"CalibrationConfig.n_starts: expected >= 1, got {self.n_starts}")
+        check_address(self.scheduler, "CalibrationConfig.scheduler")
 
 
 def dominant_period_s(fit: AttitudeFit) -> float:
@@ -431,8 +438,13 @@ class CalibrationProblem:
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
         make = lambda: build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
                                     like=self.solver, residual_fun=self.residual_fun)
-        ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
-                        make_solver=make, warm_start=cfg.solver.warm_start)
+        if cfg.scheduler != SERIAL:  # the starts on a Dask cluster, each worker building the problem itself
+            from .distributed import distributed_multistart
+
+            ms = distributed_multistart(self, x0s)
+        else:
+            ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
+                            make_solver=make, warm_start=cfg.solver.warm_start)
         if cfg.estimate_noise:
             _, raw = self.residual_fun(ms.x, self.weights())
             self.sigma = self.model.reestimate_sigmas(np.asarray(raw), len(ms.x), self.sigma)
