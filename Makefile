@@ -21,7 +21,7 @@ test: $(STAMP)
 	$(PY) -m pytest -n auto
 
 bench: $(STAMP)
-	@for suite in correction calibration formulations solvers scale survey diagnosis compliance; do \
+	@for suite in correction calibration formulations solvers scale survey surveyday diagnosis compliance; do \
 		$(VENV)/bin/adcpdyn bench $$suite --quick --out benchmarks/results || exit 1; done
 
 clean:

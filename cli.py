@@ -879,7 +879,7 @@ def build_parser() -> argparse.ArgumentParser:
     figure_format(s)
 
     s = command("bench", "benchmarks with their targets", cmd_bench)
-    s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis",
+    s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis",
                                      "compliance"],
                    help="which benchmark")
     s.add_argument("--quick", action="store_true", help="fewer seeds")

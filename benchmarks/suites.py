@@ -16,7 +16,7 @@ from ..models.rotations import course_difference_rad
 from .common import machine as _machine
 from .common import marked_span, replace_marked_block, save_figure, write_json, write_text
 
-SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "diagnosis", "compliance")
+SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis", "compliance")
 
 
 def _calibrate(case, **kw):
@@ -357,6 +357,10 @@ def _suite(suite: str, quick: bool):
         res = bench_survey([1, 2, 4] if quick else [1, 2, 3, 4, 5, 6], surveys=2 if quick else 10,
                            coverage_seeds=10 if quick else 40, heading_seeds=5 if quick else 20)
         return res, print_survey, figure_survey
+    if suite == "surveyday":
+        from .survey_day import bench_survey_day, figure_survey_day, print_survey_day
+
+        return bench_survey_day(quick), print_survey_day, figure_survey_day
     from .scale import bench_scale, figure_scale, print_scale
 
     sizes = [100, 300, 1000, 3000, 10**4] if quick else [100, 300, 1000, 3000, 10**4, 3 * 10**4, 10**5]

@@ -18,15 +18,16 @@ from ...solvers.multistart import MultistartResult, combine_starts, run_starts
 _BUILT: dict = {}  # in a worker process: the problem of the calibration it is solving starts of, by token
 
 
-def _solve_share(token: str, cases, config, x0s: np.ndarray, indices: np.ndarray) -> list:
-    """On a worker: the problem for ``token`` (built on first use, the previous one dropped), and
-    its starts ``x0s`` (rows ``indices`` of the whole design) solved one after another."""
+def _solve_share(token: str, cases, fits, config, x0s: np.ndarray, indices: np.ndarray) -> list:
+    """On a worker: the problem for ``token`` (built on first use from the runs and their attitude
+    pre-fits, the previous one dropped), and its starts ``x0s`` (rows ``indices`` of the whole
+    design) solved one after another."""
     from .problem import CalibrationProblem
 
     problem = _BUILT.get(token)
     if problem is None:
         _BUILT.clear()
-        problem = _BUILT[token] = CalibrationProblem(cases, config)
+        problem = _BUILT[token] = CalibrationProblem(cases, config, fit=fits)
     lbz, ubz = problem.lbx / problem.scale, problem.ubx / problem.scale
     return run_starts(problem.solver, x0s, lbz, ubz, problem.lbg, problem.ubg, problem.weights(), progress=False,
                       indices=indices)
@@ -41,7 +42,8 @@ def distributed_multistart(problem, x0s: np.ndarray) -> MultistartResult:
     with dask_client(problem.config.scheduler, problem.config.workers, max_workers=len(x0s)) as client:
         n = max(1, min(len(client.scheduler_info()["workers"]), len(x0s)))
         [cases] = client.scatter([problem.cases], broadcast=True)
-        futures = [client.submit(_solve_share, token, cases, config, x0s[ix], ix, pure=False)
+        fits = list(problem.fits)  # the attitude pre-fits travel (kilobytes): the workers need not redo them
+        futures = [client.submit(_solve_share, token, cases, fits, config, x0s[ix], ix, pure=False)
                    for ix in np.array_split(np.arange(len(x0s)), n)]
         done = [d for f in futures for d in f.result()]
     return combine_starts(done, x0s.shape[1])
