@@ -63,3 +63,27 @@ def test_solver_rows_are_judged_against_the_best_feasible_objective():
     assert rows["penalty"]["fraction_at_best"] == 0.0
     assert rows["penalty"]["solve_ratio_to_ipopt"] == pytest.approx(0.5)
     assert "best_objective" not in rows["crashed"]
+
+
+def test_survey_day_targets_follow_the_rows(capsys):
+    """The survey-day targets read the 20-transect one-core row, the one-core exponent and the
+    diagnosis row: met and not met as the numbers say, a failed row reported, not a crash."""
+    from adcpdyn.benchmarks.survey_day import print_survey_day
+
+    def row(n, placement, s, **kw):
+        return {"runs": n, "pings": 500 * n, "placement": placement, "calibration_s": s, "peak_rss_mb": 100.0 * n,
+                "misalignment_error_deg": 0.01, "misalignment_se_deg": 0.02, **kw}
+
+    base = {"pings_per_transect": 500, "sizes": [2, 20]}
+    fast = {**base, "rows": [row(2, "one_core", 4.0), row(20, "one_core", 40.0), row(20, "here", 39.0),
+                             row(20, "dask", 30.0), row(20, "here", 39.0, diagnosis_s=100.0, verdict="none")],
+            "exponent_runs": 1.0}
+    print_survey_day(fast)
+    assert [t["met"] for t in fast["targets"]] == [True, True, True]
+    assert "Dask LocalCluster (2 workers) 1.33x" in capsys.readouterr().out
+    slow = {**base, "rows": [row(2, "one_core", 4.0), row(20, "one_core", 80.0),
+                             {"runs": 20, "placement": "dask", "error": "worker exited with status 1: boom"}],
+            "exponent_runs": 1.3}
+    print_survey_day(slow)
+    assert [t["met"] for t in slow["targets"]] == [False, False, False]
+    assert "worker exited with status 1: boom" in capsys.readouterr().out
