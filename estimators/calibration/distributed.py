@@ -18,16 +18,14 @@ from ...solvers.multistart import MultistartResult, combine_starts, run_starts
 _BUILT: dict = {}  # in a worker process: the problem of the calibration it is solving starts of, by token
 
 
-def _solve_share(token: str, cases, fits, config, x0s: np.ndarray, indices: np.ndarray) -> list:
-    """On a worker: the problem for ``token`` (built on first use from the runs and their attitude
-    pre-fits, the previous one dropped), and its starts ``x0s`` (rows ``indices`` of the whole
-    design) solved one after another."""
-    from .problem import CalibrationProblem
-
+def _solve_share(token: str, build, cases, fits, config, x0s: np.ndarray, indices: np.ndarray) -> list:
+    """On a worker: the problem for ``token`` (``build(cases, config, fit=fits)`` on first use, from
+    the runs and their attitude pre-fits; the previous one dropped), and its starts ``x0s`` (rows
+    ``indices`` of the whole design) solved one after another."""
     problem = _BUILT.get(token)
     if problem is None:
         _BUILT.clear()
-        problem = _BUILT[token] = CalibrationProblem(cases, config, fit=fits)
+        problem = _BUILT[token] = build(cases, config, fit=fits)
     lbz, ubz = problem.lbx / problem.scale, problem.ubx / problem.scale
     return run_starts(problem.solver, x0s, lbz, ubz, problem.lbg, problem.ubg, problem.weights(), progress=False,
                       indices=indices)
@@ -35,7 +33,8 @@ def _solve_share(token: str, cases, fits, config, x0s: np.ndarray, indices: np.n
 
 def distributed_multistart(problem, x0s: np.ndarray) -> MultistartResult:
     """The multistart of ``problem`` (a :class:`.problem.CalibrationProblem` whose config names a
-    scheduler) from the starts ``x0s``, one share per worker."""
+    scheduler) from the starts ``x0s``, one share per worker; each worker builds its own problem of
+    the same class (sent by reference, as its import path)."""
     config = dataclasses.replace(problem.config, scheduler=SERIAL, workers=1)  # a worker solves its share alone
     token = uuid.uuid4().hex
     x0s = np.atleast_2d(x0s)
@@ -43,7 +42,7 @@ def distributed_multistart(problem, x0s: np.ndarray) -> MultistartResult:
         n = max(1, min(len(client.scheduler_info()["workers"]), len(x0s)))
         [cases] = client.scatter([problem.cases], broadcast=True)
         fits = list(problem.fits)  # the attitude pre-fits travel (kilobytes): the workers need not redo them
-        futures = [client.submit(_solve_share, token, cases, fits, config, x0s[ix], ix, pure=False)
+        futures = [client.submit(_solve_share, token, type(problem), cases, fits, config, x0s[ix], ix, pure=False)
                    for ix in np.array_split(np.arange(len(x0s)), n)]
         done = [d for f in futures for d in f.result()]
     return combine_starts(done, x0s.shape[1])
