@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench install clean
+.PHONY: demo test test-slow bench install clean
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -19,6 +19,11 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -n auto
+
+# the tests marked slow (minutes; not in `make test`): every diagnose variant of the fuzz harness, the real
+# transect's reference latency
+test-slow: $(STAMP)
+	$(PY) -m pytest -n auto -m slow
 
 bench: $(STAMP)
 	@for suite in correction calibration formulations solvers scale survey surveyday diagnosis compliance; do \

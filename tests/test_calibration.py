@@ -342,7 +342,7 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
     """End to end on a short deep-water run with GNSS: the Gauss-Newton solve driven by the
     assembled Jacobian ends where the one driven by CasADi's symbolic Jacobian does."""
     sc = get_scenario("deep_ship")
-    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0)), seed=4)
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=30.0)), seed=4)
     out = {}
     for jac in ("assembled", "symbolic"):
         out[jac] = _quiet_calibrate(case, n_starts=2, seed=1, formulation="minimal", jacobian=jac,

@@ -314,6 +314,7 @@ def test_a_channel_sampled_at_the_folds_period_is_spread_over_the_folds():
     assert np.array_equal(fold, _folds(model, 5, 2.0))  # the same every call
 
 
+@pytest.mark.slow  # 26 s: `make test-slow`; the field self-test bench covers the same on three files
 @pytest.mark.skipif(not (REAL / "winriver02_transect.PD0").is_file(), reason="real file absent")
 def test_reference_latency_found_on_a_real_transect():
     """winriver02 (GNSS velocities a ping apart, not on the pings), its first 230 s (the README's
