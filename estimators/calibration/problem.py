@@ -144,7 +144,9 @@ class CalibrationConfig:
     scheduler : str
         Where the starts are solved: ``none`` (this process, ``workers`` threads), ``local`` (a
         Dask LocalCluster of ``workers`` single-threaded processes) or a Dask scheduler's address
-        (``tcp://host:port``); each worker builds the problem itself (:mod:`.distributed`).
+        (``tcp://host:port``); each worker builds the problem itself (:mod:`.distributed`). A
+        script that starts a LocalCluster needs Python's ``if __name__ == "__main__":`` guard
+        (its workers are spawned processes that import the script).
     jacobian : str
         Residual Jacobian (Gauss-Newton Hessian, standard errors): ``symbolic`` (the whole
         problem expanded to SX and differentiated by CasADi), ``assembled`` (per-row
