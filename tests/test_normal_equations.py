@@ -379,7 +379,7 @@ def test_field_selftest_says_why_an_error_was_not_named():
                              gap_before=0.4)
     row = {"expected": "moving_bed", "verdict": "compass_offset", "hit": False}
     mine = {"delta_bic_hac": -27.4, "delta_bic": -40.0, "shrink_fraction": 0.33, "significant": True}
-    assert outcome(row, mine, result) == "outscored by compass_offset (BIC gain -27, shrink 33 %)"
+    assert outcome(row, mine, result) == "outscored by compass_offset (BIC change -27, shrink 33 %)"
     assert outcome({**row, "verdict": "none"}, {**mine, "significant": False}, result).startswith("below detection (BIC")
     assert outcome({**row, "expected": "reference_latency"}, None, result) == "not tried: no reference"
     flat = SimpleNamespace(base=result.base, gap_before=-0.2)  # nothing to explain: not the effect's detection limit

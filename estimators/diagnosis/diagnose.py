@@ -143,7 +143,7 @@ class EffectScore:
     status: str
     iterations: int
     colour_factor: float = 1.0  # long-run over white variance of the per-bin likelihood gains (>= 1)
-    delta_bic_hac: float = 0.0  # -2 delta_ll / colour_factor + k log n: the BIC gain under coloured residuals
+    delta_bic_hac: float = 0.0  # -2 delta_ll / colour_factor + k log n: the BIC change under coloured residuals (negative: better)
     significant: bool = False
     confounded_with: list = field(default_factory=list)
     confounded_share: float = 0.0
