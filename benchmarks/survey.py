@@ -122,24 +122,41 @@ def bench_survey(sizes, surveys: int, coverage_seeds: int, starts: int = 24, hea
                          {"bt_ar1": BT_AR1, "reference_ar1": REFERENCE_AR1})
     out["coverage"] = {"bt_ar1": BT_AR1, "reference_ar1": REFERENCE_AR1, "rows": cov}
     out["heading_coverage"] = heading_coverage(heading_seeds)
+    out["heading_coverage_prior"] = heading_coverage(heading_seeds, deviation_from_prior=True)
     return out
 
 
-def heading_coverage(seeds: int, heading_deg: float = COMPASS_HEADING_NOISE_DEG, runs=(2, 4)) -> dict:
+def heading_coverage(seeds: int, heading_deg: float = COMPASS_HEADING_NOISE_DEG, runs=(2, 4),
+                     deviation_from_prior: bool = False) -> dict:
     """Coverage under a compass-grade heading noise (the noise is in the regressors: the beams'
     rotation and the compass deviation's argument): surveys of 2 and 4 transects, each seed's
-    misalignment and every run's bed error over its reported SE."""
+    misalignment and every run's bed error over its reported SE. The compass deviation's B and C
+    as the survey draws them (uniform in +-1 deg), or with ``deviation_from_prior`` from the
+    calibration's own prior N(0, ``compass_deviation_prior_rad``^2) (:func:`prior_compass`): the
+    SEs of a regularised estimate carry its prior, and are calibrated over truths drawn from it."""
     noise = {"heading_rad": float(np.deg2rad(heading_deg))}
-    rows = [{"runs": K, **row} for K in runs for row in _coverage_rows(K, [500 + s for s in range(1, seeds + 1)], noise)]
-    return {"heading_deg": heading_deg, "rows": rows}
+    rows = [{"runs": K, **row} for K in runs
+            for row in _coverage_rows(K, [500 + s for s in range(1, seeds + 1)], noise, deviation_from_prior)]
+    return {"heading_deg": heading_deg, "deviation": "prior" if deviation_from_prior else "survey", "rows": rows}
 
 
-def _coverage_rows(runs: int, seeds, noise: dict) -> list:
+def prior_compass(seed: int) -> tuple:
+    """(A, B, C) of a survey's compass: A as river_survey's spec draws it (8-25 deg, either sign), B
+    and C from the calibration's deviation prior."""
+    from ..estimators.calibration.problem import CalibrationConfig
+
+    rng = np.random.default_rng(10_000 + seed)
+    a = rng.uniform(np.deg2rad(8.0), np.deg2rad(25.0)) * rng.choice([-1.0, 1.0])
+    b, c = rng.normal(0.0, CalibrationConfig().compass_deviation_prior_rad, 2)
+    return float(a), float(b), float(c)
+
+
+def _coverage_rows(runs: int, seeds, noise: dict, deviation_from_prior: bool = False) -> list:
     """Per survey seed (``runs`` transects with ``noise``, 8 starts): the errors and SEs
-    (:func:`_scores`) and the time."""
+    (:func:`_scores`) and the time; with ``deviation_from_prior`` the compass of :func:`prior_compass`."""
     rows = []
     for seed in seeds:
-        cases = _transects(runs, seed, noise=noise)
+        cases = _transects(runs, seed, noise=noise, **({"compass_rad": prior_compass(seed)} if deviation_from_prior else {}))
         r, setup, solve = _solve(cases, 8)
         rows.append({"seed": seed, "time_s": setup + solve, **_scores(r, _truth(cases))})
     return rows
@@ -204,10 +221,12 @@ def print_survey(res: dict) -> None:
           f"{res['coverage']['reference_ar1']}): misalignment and bed errors within 3 SE in {100 * hac:.0f} % of seeds with "
           f"the reported SEs, {100 * white:.0f} % with white-noise SEs (misalignment SE inflation median x{np.median(infl):.2f})")
     heading = heading_coverage_summary(res["heading_coverage"]) if "heading_coverage" in res else {}
-    for K, h in heading.items():
-        print(f"heading noise {res['heading_coverage']['heading_deg']:g} deg, {K} transects, {h['surveys']} surveys: "
-              f"misalignment within 3 SE {100 * h['misalignment_within_3se']:.0f} % (RMS error/SE "
-              f"{h['misalignment_rms_z']:.2f}), beds {100 * h['bed_within_3se']:.0f} % (RMS {h['bed_rms_z']:.2f})")
+    for key, words in (("heading_coverage", "deviation as the survey draws it, +-1 deg"),
+                       ("heading_coverage_prior", "deviation drawn from the calibration's prior")):
+        for K, h in (heading_coverage_summary(res[key]) if key in res else {}).items():
+            print(f"heading noise {res[key]['heading_deg']:g} deg, {K} transects, {h['surveys']} surveys ({words}): "
+                  f"misalignment within 3 SE {100 * h['misalignment_within_3se']:.0f} % (RMS error/SE "
+                  f"{h['misalignment_rms_z']:.2f}), beds {100 * h['bed_within_3se']:.0f} % (RMS {h['bed_rms_z']:.2f})")
     four = next((r for r in rows if r["runs"] == 4), None)
     acc = res["accuracy"]
     targets = []

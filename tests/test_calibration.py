@@ -135,6 +135,11 @@ def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_cas
     assert auto.moving_bed_test["speed_m_s"] == pytest.approx(float(np.hypot(*free.moving_bed_velocity_m_s)), rel=1e-6)
     assert "moving bed not tested by these runs" in " ".join(auto.warnings)
     assert auto.installation_ypr_se_rad[0] == pytest.approx(fixed.installation_ypr_se_rad[0], rel=1e-6)
+    # the fixed-bed numbers come with the confounding named and the yaw's SE if the bed moves (the free solve's)
+    [assumed] = auto.confounded
+    assert assumed["pair"] == ["installation_yaw", "moving_bed_velocity"] and assumed["assumed"].startswith("bed fixed")
+    assert assumed["se_if_bed_moves_rad"] == pytest.approx(free.installation_ypr_se_rad[0], rel=1e-6)
+    assert "if the bed moves, the installation yaw is known only to" in " ".join(auto.warnings)
     assert free.moving_bed == "constant" and free.moving_bed_test is None
     assert [c["pair"] for c in free.confounded] == [["installation_yaw", "moving_bed_velocity"]]
     assert "moving bed vs installation yaw" in " ".join(free.warnings)

@@ -426,11 +426,15 @@ class CalibrationProblem:
         test = moving_bed_test(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s, confounded,
                                mean_flow_speed(self.cases))
         if test["decision"] != "moving":  # freed only when the data say it moves (QRev: a test decides)
+            free = result
             result = CalibrationProblem(self.cases, dataclasses.replace(self.config, moving_bed="off"), fit=self.fits).solve()
             if test["decision"] == "undetermined":
                 result.warnings.append(f"moving bed not tested by these runs ({test['reason']}): solved without one; a "
                                        "bed that does move is then carried by the heading: run a loop or stationary test, "
                                        "or calibrate transects on several courses together")
+                assumed = assumed_fixed_bed(free)
+                result.confounded += assumed
+                result.warnings += [c["statement"] for c in assumed]
         result.moving_bed_test = test
         return result
 
@@ -758,6 +762,24 @@ class CalibrationProblem:
                     num, den = num + float(np.sum(e[s][m] ** 2)), den + float(m.sum())
             out[name] = num / max(den, 1.0)
         return out
+
+
+def assumed_fixed_bed(free: CalibrationResult) -> list:
+    """The confounding of the solve with the bed free, carried into the result solved with it fixed
+    (the moving-bed test could not decide): the yaw is then known to its reported SE only if the bed
+    is still; each entry adds the yaw's SE with the bed free (``se_if_bed_moves_rad``), so a reader
+    of CALIB.json sees both without parsing a warning."""
+    out = []
+    for c in free.confounded:
+        if "moving_bed_velocity" not in c.get("pair", []):
+            continue
+        se = free.heading_misalignment_se_rad if c["pair"][0] == "heading_misalignment" else free.installation_ypr_se_rad[0]
+        name = c["pair"][0].replace("_", " ")
+        out.append({**c, "assumed": "bed fixed (the moving-bed test could not decide)", "se_if_bed_moves_rad": float(se),
+                    "statement": (f"{name} solved with the bed fixed: the moving-bed test could not tell a moving bed from "
+                                  f"a heading error on these courses; if the bed moves, the {name} is known only to +- "
+                                  f"{np.rad2deg(se):.2f} deg (its SE with the bed free), not to its reported SE")})
+    return out
 
 
 def calibrate(case: Case, config: CalibrationConfig | None = None) -> CalibrationResult:
