@@ -76,10 +76,13 @@ def test_joint_calibration_starts_on_a_local_cluster_agree_with_this_process(tmp
     from adcpdyn.cases.simulation import simulate
     from adcpdyn.cases.io import write_case
 
+    import dataclasses
+
     paths = []
     for k, sc in enumerate(survey_scenarios("river_survey", 2, 5)):
         paths.append(tmp_path / f"t{k}.h5")
-        write_case(simulate(sc, seed=5 + k), paths[-1])
+        short = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0))  # ~100 pings each
+        write_case(simulate(short, seed=5 + k), paths[-1])
     common = ["calibrate", *map(str, paths), "--joint", "--starts", "3"]
     assert main(common + ["--out", str(tmp_path / "here.json")]) == 0
     assert main(common + ["--scheduler", "local", "--workers", "2", "--out", str(tmp_path / "cluster.json")]) == 0

@@ -18,7 +18,7 @@ from .model import Fit, GapModel, free_jacobian
 from .normal_equations import as_sparse, inverse_columns
 
 SEARCH = (1.0 / 16.0, 4.0)  # sizes searched: from the smallest typical one over 16 to the largest times 4
-BISECTIONS = 10
+BISECTIONS = 7  # the search spans about 7 octaves: a limit to about 5 %
 
 
 def signal_statistic(model: GapModel, fit: Fit, case: Case, error: str, size: float, config: DiagnosisConfig,
