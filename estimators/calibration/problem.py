@@ -38,7 +38,7 @@ from ...solvers.cluster import SERIAL, check_address
 from ...solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..formulations import FORMULATIONS
-from ..statistics.hac import ping_bins, sandwich
+from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
                                  heading_span, knot_times)
 from ..statistics.uncertainty import uncertainty
@@ -604,9 +604,8 @@ class CalibrationProblem:
             return white, info
         sw = sandwich(J, e, unc.cov_z[:, Q], self.model.row_run, self.model.row_time,
                       ping_bins([run.case for run in self.runs]), known=self.model.prior_rows)
-        d_w, d_h = np.diag(white), np.diag(sw.cov)
-        ratio = np.sqrt(np.where(d_h > 0, np.maximum(1.0, d_w / np.where(d_h > 0, d_h, 1.0)), 1.0))
-        cov = ratio[:, None] * sw.cov * ratio[None, :]
+        d_w = np.diag(white)
+        cov = at_least_white(sw.cov, d_w)
         inflation = np.sqrt(np.diag(cov) / np.where(d_w > 0, d_w, np.inf))
         info.update({"lags": sw.lags, "influence_lag1": sw.rho, "time_bins": sw.bins,
                      "inflation_over_white": {self.names[i]: float(f) for i, f in zip(Q, inflation) if np.isfinite(f) and f > 0},

@@ -42,7 +42,7 @@ from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
 from ..calibration.problem import ATTITUDES, choose_attitude
 from ..calibration.record import CalibrationRecord
-from ..statistics.hac import andrews_lags, newey_west, ping_bins, sandwich
+from ..statistics.hac import andrews_lags, at_least_white, newey_west, ping_bins, sandwich
 from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
                                  knot_times, ping_knots)
 from . import where as where_mod
@@ -347,11 +347,8 @@ def coloured_covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
     better determined than white ones would)."""
     hac = _hac_covariance(fit, model, index)
     white = _standard_errors(fit, model, index)
-    sd = np.sqrt(np.maximum(np.diag(hac), 0.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        stretch = np.where(sd > 0, np.maximum(white / np.where(sd > 0, sd, 1.0), 1.0), 1.0)
-    out = hac * np.outer(stretch, stretch)
-    missing = sd == 0  # no HAC information (a pinned unknown): the white variance alone
+    out = at_least_white(hac, white ** 2)
+    missing = ~(np.diag(hac) > 0)  # no HAC information (a pinned unknown): the white variance alone
     out[missing, :] = out[:, missing] = 0.0
     out[missing, missing] = white[missing] ** 2
     return out

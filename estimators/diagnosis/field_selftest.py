@@ -172,15 +172,27 @@ def _along(C: np.ndarray, e: np.ndarray) -> float:
     return 1.0 / np.sqrt(info) if info > 0 else np.inf
 
 
+def _clean_covariance(clean: dict, keys: list) -> np.ndarray:
+    """The clean file's covariance of its own effect's unknowns ``keys`` (in that order): its
+    ``covariance`` (rows in the order of its ``params``), else its standard errors alone."""
+    C = clean.get("covariance")
+    if C is None:
+        return np.diag([clean["params_se"][k] ** 2 for k in keys])
+    at = [list(clean["params"]).index(k) for k in keys]
+    return np.asarray(C)[np.ix_(at, at)]
+
+
+def _signature_vector(signature: dict, keys: list) -> np.ndarray:
+    """The error's signature (unknown suffix -> change per unit) on the unknowns ``keys``."""
+    return np.array([signature.get(k.rsplit(".", 1)[-1], 0.0) for k in keys])
+
+
 def moved_limit(clean: dict, signature: dict) -> float | None:
     """The smallest error :func:`_moved` names on a file whose own effect carries it: MOVED_Z
     standard errors of the size read from the shift, the clean and the injected estimates
     counted as independent (sqrt 2 of the clean one's); None without a signature."""
     keys = list(clean["params"])
-    e = np.array([signature.get(k.rsplit(".", 1)[-1], 0.0) for k in keys])
-    C = clean.get("covariance")
-    C = np.diag([clean["params_se"][k] ** 2 for k in keys]) if C is None else np.asarray(C)
-    se = _along(C, e)
+    se = _along(_clean_covariance(clean, keys), _signature_vector(signature, keys))
     return float(MOVED_Z * np.sqrt(2.0) * se) if np.isfinite(se) else None
 
 
@@ -195,10 +207,8 @@ def _moved(given: dict, clean: dict, signature: dict, covariance: dict | None = 
     names = [n for n in given if n.split("/")[-1] in clean["params"]]
     keys = [n.split("/")[-1] for n in names]
     d = np.array([given[n]["value"] - clean["params"][k] for n, k in zip(names, keys)])
-    C = _covariance_of(covariance, names, [given[n]["se"] for n in names])
-    C_clean = clean.get("covariance")
-    C = C + (np.diag([clean["params_se"][k] ** 2 for k in keys]) if C_clean is None else np.asarray(C_clean))
-    e = np.array([signature.get(k.rsplit(".", 1)[-1], 0.0) for k in keys])
+    C = _covariance_of(covariance, names, [given[n]["se"] for n in names]) + _clean_covariance(clean, keys)
+    e = _signature_vector(signature, keys)
     se = _along(C, e)
     if np.isfinite(se):
         size = float(se ** 2 * (e @ np.linalg.pinv(C) @ d))

@@ -106,3 +106,12 @@ def sandwich(J, e: np.ndarray, P_q: np.ndarray, row_run: np.ndarray, row_time: n
         cov += newey_west(series, L)
         lags.append(L), rhos.append(rho), counts.append(series.shape[0])
     return Sandwich(cov, lags, rhos, counts)
+
+
+def at_least_white(cov: np.ndarray, white_var: np.ndarray) -> np.ndarray:
+    """A HAC covariance with each variance raised to at least the white one (``white_var``), its
+    correlations kept: coloured residuals never make an unknown better determined than white ones
+    would. An unknown without HAC information (variance 0) is left as it is."""
+    d = np.diag(cov)
+    ratio = np.sqrt(np.where(d > 0, np.maximum(1.0, white_var / np.where(d > 0, d, 1.0)), 1.0))
+    return ratio[:, None] * cov * ratio[None, :]
