@@ -116,6 +116,22 @@ def integer_ticks(axis) -> None:
     axis.set_major_locator(MaxNLocator(integer=True))
 
 
+def run_worker(module: str, args: list, time_limit_s: float, env: dict | None = None) -> tuple:
+    """``python -m adcpdyn.benchmarks.MODULE ARGS`` in a child process (its peak memory its own):
+    (the JSON of its last stdout line, None) or (None, why it gave none: the time limit, or its exit
+    status and last stderr line)."""
+    cmd = [sys.executable, "-m", f"adcpdyn.benchmarks.{module}", *map(str, args)]
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit_s,
+                             env=None if env is None else {**os.environ, **env})
+    except subprocess.TimeoutExpired:
+        return None, f"exceeded the time limit of {time_limit_s:.0f} s"
+    if out.returncode != 0:
+        tail = out.stderr.strip().splitlines()[-1] if out.stderr.strip() else ""
+        return None, f"worker exited with status {out.returncode}: {tail}"
+    return json.loads(out.stdout.strip().splitlines()[-1]), None
+
+
 def save_figure(fig, path: Path) -> None:
     """Save a matplotlib figure atomically and close it."""
     import matplotlib.pyplot as plt

@@ -8,14 +8,11 @@ log-log least-squares fit over the measured sizes.
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from .common import Target, machine, print_targets, save_figure
+from .common import Target, machine, print_targets, run_worker, save_figure
 from .scale_worker import HESSIAN, PING_INTERVAL_S, SCENARIO
 
 LINEAR_TOLERANCE = 0.1  # exponent up to 1.1 counts as linear growth (timing noise)
@@ -38,17 +35,11 @@ def bench_scale(sizes, seed: int = 1, time_limit_s: float = 600.0, memory_limit_
                 skipped.append({"n_pings": n, "reason": f"predicted {t_pred:.0f} s and {m_pred:.0f} MB from the sizes "
                                 f"measured (limits {time_limit_s:.0f} s, {memory_limit_mb:.0f} MB)"})
                 continue
-        cmd = [sys.executable, "-m", "adcpdyn.benchmarks.scale_worker", str(n), str(seed)]
-        try:
-            out = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit_s)
-        except subprocess.TimeoutExpired:
-            skipped.append({"n_pings": n, "reason": f"exceeded the time limit of {time_limit_s:.0f} s"})
+        row, why = run_worker("scale_worker", [n, seed], time_limit_s)
+        if row is None:
+            skipped.append({"n_pings": n, "reason": why})
             break
-        if out.returncode != 0:
-            skipped.append({"n_pings": n, "reason": f"worker exited with status {out.returncode}: "
-                            f"{out.stderr.strip().splitlines()[-1] if out.stderr.strip() else ''}"})
-            break
-        rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        rows.append(row)
         print(f"  {rows[-1]['n_pings']:>7d} pings: {rows[-1]['calibration_s']:.2f} s, {rows[-1]['peak_rss_mb']:.0f} MB",
               flush=True)
     res = {"suite": "scale", "machine": machine(), "scenario": SCENARIO, "ping_interval_s": list(PING_INTERVAL_S),

@@ -10,14 +10,9 @@ calibration options otherwise (24 starts, moving bed auto).
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
-
 import numpy as np
 
-from .common import Target, machine, print_targets, save_figure
+from .common import Target, machine, print_targets, run_worker, save_figure
 from .scale import LINEAR_TOLERANCE, growth_exponent
 from .survey_day_worker import PINGS_PER_TRANSECT, PING_INTERVAL_S, SURVEY
 
@@ -26,16 +21,10 @@ TARGET_CALIBRATION_S, TARGET_DIAGNOSIS_S = 60.0, 300.0
 
 
 def _run(runs: int, placement: str, diagnose: bool = False, time_limit_s: float = 1800.0) -> dict:
-    cmd = [sys.executable, "-m", "adcpdyn.benchmarks.survey_day_worker", str(runs), placement] + (["diagnose"] if diagnose else [])
-    env = {**os.environ, **(ONE_THREAD if placement == "one_core" else {}), "ADCPDYN_PROGRESS": "0"}
-    try:
-        out = subprocess.run(cmd, capture_output=True, text=True, timeout=time_limit_s, env=env)
-    except subprocess.TimeoutExpired:
-        return {"runs": runs, "placement": placement, "error": f"exceeded the time limit of {time_limit_s:.0f} s"}
-    if out.returncode != 0:
-        tail = out.stderr.strip().splitlines()[-1] if out.stderr.strip() else ""
-        return {"runs": runs, "placement": placement, "error": f"worker exited with status {out.returncode}: {tail}"}
-    row = json.loads(out.stdout.strip().splitlines()[-1])
+    env = {**(ONE_THREAD if placement == "one_core" else {}), "ADCPDYN_PROGRESS": "0"}
+    row, why = run_worker("survey_day_worker", [runs, placement] + (["diagnose"] if diagnose else []), time_limit_s, env)
+    if row is None:
+        return {"runs": runs, "placement": placement, "error": why}
     print(f"  {runs:3d} transects ({row['pings']:6d} pings), {placement:>8s}: calibration {row['calibration_s']:6.1f} s"
           + (f", diagnosis {row['diagnosis_s']:6.1f} s ({row['verdict']})" if diagnose else "")
           + f", peak {row['peak_rss_mb']:5.0f} MB, misalignment error {row['misalignment_error_deg']:+.3f} deg "

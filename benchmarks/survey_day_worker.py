@@ -41,6 +41,7 @@ def measure(runs: int, placement: str, diagnose: bool = False) -> dict:
     import numpy as np
 
     from .. import api
+    from .survey import _truth
 
     if placement == "one_core" and hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
@@ -50,8 +51,7 @@ def measure(runs: int, placement: str, diagnose: bool = False) -> dict:
     tic = time.perf_counter()
     r = api.calibrate(cases, **PLACEMENTS[placement])
     calibration_s = time.perf_counter() - tic
-    truth = float(np.angle(np.mean(np.exp(1j * np.array(
-        [float(c.truth.extra_attrs["effective_heading_misalignment_rad"]) for c in cases])))))
+    truth = _truth(cases)["misalignment_rad"]
     out = {"runs": runs, "placement": placement, "pings": int(sum(c.pings.n for c in cases)), "simulate_s": simulate_s,
            "calibration_s": calibration_s, "success": bool(r.success), "starts": len(r.multistart.starts),
            "fraction_at_best": r.multistart.fraction_at_best,
