@@ -570,7 +570,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
 
 
 # ----------------------------------------------------------------------------------------------- diagnose
-def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", navigation: str = "knots",
+def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", navigation: str = "auto",
              given=(), out=None, fmt: str = "png", progress: Callable[[str], None] | None = None,
              accept_other_instrument: bool = False) -> "DiagnosisResult":
     """Where the sim-to-real gap of a run lies, which unmodelled effect causes it, how far it shrinks.
@@ -586,10 +586,11 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         Catalog effects to try (default: all).
     attitude : {'auto', 'model', 'samples'}
         The beams' attitude.
-    navigation : {'random_walk', 'knots'}
+    navigation : {'auto', 'random_walk', 'knots'}
         The base's vessel velocity: a velocity at every ping tied by a random-walk prior whose
         intensity the data set (a real boat's ping-to-ping speed changes are motion), or a
-        piecewise-linear curve through knots (smooth simulated courses).
+        piecewise-linear curve through knots (smooth simulated courses); ``auto`` (default): the
+        random walk for runs under way on a moving reference, knots for stationary ones.
     given : sequence of str, optional
         Effects the run is known to carry (e.g. what its clean run named): fitted first and kept
         in every model, so the candidates are judged on top of them (``result.given`` holds
@@ -648,7 +649,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     return result
 
 
-def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "knots", given=()) -> "DiagnosisConfig":
+def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "auto", given=()) -> "DiagnosisConfig":
     """The diagnosis options the API and the command line expose (the catalog's effects unless named)."""
     from .estimators.diagnosis.diagnose import DiagnosisConfig
 
@@ -656,7 +657,7 @@ def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "k
                            navigation=navigation, given=tuple(given or ()))
 
 
-def field_selftest(case, calibration=None, *, navigation: str = "knots", effects=None, attitude: str = "auto",
+def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=None, attitude: str = "auto",
                    sizes: dict | None = None, out=None, fmt: str = "png",
                    progress: Callable[[str], None] | None = None, accept_other_instrument: bool = False) -> dict:
     """What this file can detect: each field error (compass offset, attitude and reference

@@ -862,9 +862,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--given", nargs="+", default=(), metavar="EFFECT",
                    help="effects the run is known to carry (e.g. what its clean run named): fitted first and kept, "
                         "the candidates judged on top of them")
-    s.add_argument("--navigation", default="knots", choices=["random_walk", "knots"],
+    s.add_argument("--navigation", default="auto", choices=["auto", "random_walk", "knots"],
                    help="the base's vessel velocity: random_walk (a velocity at every ping, its random-walk intensity "
-                        "from the data: a real boat's speed changes between fixes are motion) or knots (a smooth curve)")
+                        "from the data: a real boat's speed changes between fixes are motion), knots (a smooth curve) "
+                        "or auto: random_walk for a run under way on a moving reference, knots for a stationary one")
     s.add_argument("--field-selftest", action="store_true",
                    help="what this file can detect: the field's errors (compass offset, attitude and reference latency, "
                         "moving bed, sound speed) injected at typical sizes into its recorded channels, each diagnosed "

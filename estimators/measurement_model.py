@@ -52,6 +52,21 @@ NED = ("north", "east", "down")
 ATTITUDE_SOURCES = ("model", "samples", "frozen")
 MOVING_BEDS = ("off", "constant", "section")
 NAVIGATIONS = ("knots", "random_walk")
+
+
+def choose_navigation(case: Case, attitude_source: str, requested: str = "auto") -> str:
+    """A run's vessel-velocity model: ``requested``, or for ``auto`` a velocity per ping
+    (``random_walk``) where the run is under way on a moving reference and its beams take the
+    sensor's samples (a real boat, which changes speed between two fixes: the bottom track sees it,
+    a smooth curve does not), ``knots`` where a motion model follows the attitude (its course as
+    smooth as the model) or the reference stays put."""
+    if requested not in NAVIGATIONS + ("auto",):
+        raise ValueError(f"navigation: expected one of {list(NAVIGATIONS + ('auto',))}, got {requested!r}")
+    if requested != "auto":
+        return requested
+    ref = case.reference
+    moving = ref is not None and not ref.stationary and ref.velocity_m_s is not None
+    return "random_walk" if moving and attitude_source == "samples" else "knots"
 ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
 HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
 BED_SCALE_M_S = 0.05

@@ -170,6 +170,25 @@ def test_random_walk_rows_are_velocity_increments_over_root_dt():
         DiagnosisConfig(navigation="spline")
 
 
+def test_auto_navigation_walks_where_a_real_boat_is_under_way():
+    """auto: a velocity per ping for a moving reference with the sensor's samples in the beams (a real
+    boat), knots where a motion model follows the attitude or the reference stays put."""
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.measurement_model import choose_navigation
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=2)
+    assert case.reference is not None and not case.reference.stationary
+    assert choose_navigation(case, "samples") == "random_walk"
+    assert choose_navigation(case, "model") == "knots"
+    still = case.replace(reference=dataclasses.replace(case.reference, stationary=True))
+    assert choose_navigation(still, "samples") == "knots"
+    assert choose_navigation(case, "samples", "knots") == "knots"
+    with pytest.raises(ValueError, match="navigation: expected one of"):
+        choose_navigation(case, "samples", "spline")
+
+
 def test_reference_latency_model_is_the_velocity_a_delay_earlier():
     """The hook's v(t - d0) - (d - d0) v'(t - d0), the slope from the knots, equals v(t - d) for a
     velocity linear in time whatever the expansion point, and to second order in d - d0 otherwise."""

@@ -43,7 +43,8 @@ from ..attitude_fit import fit_attitude
 from ..calibration.problem import ATTITUDES, choose_attitude
 from ..calibration.record import CalibrationRecord
 from ..statistics.hac import andrews_lags, at_least_white, newey_west, ping_bins, sandwich
-from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, course_offset_rad, heading_centre,
+from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, choose_navigation, course_offset_rad,
+                                 heading_centre,
                                  knot_times, ping_knots)
 from . import where as where_mod
 from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
@@ -104,7 +105,7 @@ class DiagnosisConfig:
     max_effects: int = 3
     confounded_share: float = 0.9
     attitude: str = "auto"  # beams' attitude: model | samples | auto (as the calibration chooses)
-    navigation: str = "knots"  # the base's vessel velocity: random_walk (a velocity per ping) | knots
+    navigation: str = "auto"  # the base's vessel velocity: random_walk (a velocity per ping) | knots | auto
     workers: int = min(2, os.cpu_count() or 1)  # threads refitting a round's candidates at once
     solver: SolverOptions = SolverOptions(tol=1e-6, max_iter=200, hessian="gauss-newton", expand=False, mu_init=1e-5)
 
@@ -117,8 +118,8 @@ class DiagnosisConfig:
             raise ValueError(f"cv_folds: expected an integer >= 2, got {self.cv_folds}")
         if not self.cv_block_s > 0:
             raise ValueError(f"cv_block_s: expected a positive duration in s, got {self.cv_block_s}")
-        if self.navigation not in NAVIGATIONS:
-            raise ValueError(f"navigation: expected one of {list(NAVIGATIONS)}, got {self.navigation!r}")
+        if self.navigation not in NAVIGATIONS + ("auto",):
+            raise ValueError(f"navigation: expected one of {list(NAVIGATIONS + ('auto',))}, got {self.navigation!r}")
         if self.max_effects < 1:
             raise ValueError(f"max_effects: expected an integer >= 1, got {self.max_effects}")
         if not np.isfinite(self.heldout_z_walk):
@@ -391,9 +392,10 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationReco
         if own and own.attitude_model is not None:  # this very run was calibrated: its motion model starts the fit
             af = dataclasses.replace(af, params=own.attitude_model)
         source, reason = choose_attitude(case, af, config.attitude)
-        knots = ping_knots(case) if config.navigation == "random_walk" else knot_times(case, None)
+        navigation = choose_navigation(case, source, config.navigation)
+        knots = ping_knots(case) if navigation == "random_walk" else knot_times(case, None)
         runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason,
-                             navigation=config.navigation))
+                             navigation=navigation))
     head = runs[0].case.attitude.frame == "transducer"
     moving = any(r.moving_reference for r in runs)
     v = cases[0].vessel
@@ -914,7 +916,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                                                             for r in base.runs)),
                  "attitude_source_reason": "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs)),
                  "calibration": base.pins.source or None, "pinned": base.pins.values, "notes": base.notes,
-                 "navigation": config.navigation,
+                 "navigation": ", ".join(dict.fromkeys(r.navigation for r in base.runs)),
                  "log_likelihood": float(base_fit.log_likelihood(base_model)), "n_observations": n_obs,
                  "skipped_effects": skipped,
                  "unknowns": {n: float(base_fit.x[i]) for i, n in enumerate(base_model.names)

@@ -42,6 +42,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
         seconds = time.perf_counter() - tic  # one diagnosis, what a user waits for (not the own effects' rounds)
         if error == "clean":
             own, own_values = _own_effects(case, config, calibration, r)
+            navigation = r.base["navigation"]
         expected = "none" if error == "clean" else FIELD_ERRORS[error][0]
         mine = next((s for s in r.ranking if s["effect"] == expected and s["round"] == 1), None)
         row = {"error": error, "size": size, "unit": FIELD_ERRORS[error][1] if error != "clean" else "",
@@ -81,7 +82,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
         rows.append(row)
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
-    return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": config.navigation,
+    return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": navigation,
             "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
 
 
