@@ -151,6 +151,31 @@ def test_bad_inputs(tmp_path):
 
 
 @needs_reader
+def test_a_window_where_the_bottom_track_is_lost_fails_in_one_line_naming_the_output(tmp_path, capsys):
+    """winriver02's last 90 s have no bottom track: the GNSS comparison skips it (it crashed in
+    np.interp) and the error names the output and the instrument file, not the temporary file."""
+    from adcpdyn.cli import main
+
+    out = tmp_path / "end.h5"
+    assert main(["import", str(real("winriver02_transect.PD0")), "--start", "375", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert f"{out} (from winriver02_transect.PD0): /pings/bt_radial_m_s" in err and "adcpdyn-tmp" not in err
+    assert not out.exists()
+
+
+def test_window_velocity_of_too_few_pings_is_nan():
+    from adcpdyn.cases.importers.gnss import _window_velocity
+
+    windows = np.array([[0.0, 1.0], [2.0, 2.0]])
+    assert np.isnan(_window_velocity(np.array([0.5]), np.array([[1.0, 0.0]]), windows)).all()
+    windows = np.array([[0.0, 1.0], [2.0, 2.0], [1.0, 3.0]])
+    w = _window_velocity(np.array([0.0, 2.0]), np.array([[1.0, 0.0], [3.0, 0.0]]), windows)
+    # positions trapezoidal at the pings, linear between them: [0, 1] averages the segment (2); the last leaves the span
+    np.testing.assert_allclose(w, [[2.0, 0.0], [3.0, 0.0], [np.nan, np.nan]])
+
+
+@needs_reader
 def test_import_refuses_to_overwrite_input(tmp_path, capsys):
     from adcpdyn.cli import main
 

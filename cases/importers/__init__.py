@@ -8,6 +8,7 @@ writes both atomically (``/provenance`` plus attributes on the case's groups).
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import h5py
@@ -111,9 +112,11 @@ def _attr_value(v):
 def write_imported(case, attrs: dict, out, source=None) -> None:
     """Write the case and its audit attributes atomically; never over the source file."""
     from ..atomic import atomic_path, refuse_overwrite_input
-    from ..io import write_case
+    from ..io import validate_case, write_case
 
     refuse_overwrite_input(out, source)
+    # checked under the names the user gave (the temporary file's is nobody's)
+    validate_case(case, source=f"{os.fspath(out)} (from {Path(source).name})" if source is not None else os.fspath(out))
     with atomic_path(out) as tmp:
         write_case(case, tmp)
         with h5py.File(tmp, "a") as f:

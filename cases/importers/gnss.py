@@ -168,7 +168,11 @@ def coarse_offset(ds) -> float:
 
 
 def _window_velocity(t_adcp, v_bt, windows):
-    """Bottom-track velocity averaged over each window (ADCP clock), (L, 2) horizontal."""
+    """Bottom-track velocity averaged over each window (ADCP clock), (L, 2) horizontal; NaN where
+    the windows leave the bottom track's span, all NaN with fewer than two valid pings (a window of
+    a file cut where the bottom track is lost)."""
+    if np.size(t_adcp) < 2:
+        return np.full((len(windows), 2), np.nan)
     pos = np.column_stack([np.concatenate([[0.0], np.cumsum(0.5 * (v_bt[1:, j] + v_bt[:-1, j]) * np.diff(t_adcp))])
                            for j in range(2)])
     a, b = windows[:, 0], windows[:, 1]
