@@ -361,6 +361,9 @@ def _calibration_config(args, formulation=None, one=True):
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
                          f"{args.moving_bed} (drop it, or use --moving-bed section)")
+    if args.jacobian == "assembled" and args.navigation == "random_walk":
+        raise ValueError("--jacobian assembled: assembles knot navigation only, not --navigation random_walk (use "
+                         "--jacobian auto or symbolic)")
     from .solvers.multistart import SolverOptions
 
     declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
@@ -372,7 +375,7 @@ def _calibration_config(args, formulation=None, one=True):
     return CalibrationConfig(**placement, formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
                              jacobian=args.jacobian, attitude=args.attitude, moving_bed=args.moving_bed,
-                             moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
+                             navigation=args.navigation, moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
                              standard_errors=args.standard_errors, magnetic_declination_rad=declination,
                              solver=SolverOptions(method=args.solver))
 
@@ -813,6 +816,10 @@ def build_parser() -> argparse.ArgumentParser:
                             "samples, for runs no motion model follows) or auto")
         s.add_argument("--jacobian", default="auto", choices=["auto", "symbolic", "assembled"],
                        help="symbolic (whole problem differentiated by CasADi) or assembled (per row, long runs)")
+        s.add_argument("--navigation", default="knots", choices=["knots", "random_walk", "auto"],
+                       help="the vessel's velocity: knots (piecewise-linear), random_walk (a velocity at every ping, "
+                            "its random-walk intensity and the noise levels from the data) or auto (random_walk for "
+                            "a run under way whose beams take the sensor's samples, as a real file's do)")
         s.add_argument("--moving-bed", default="auto", choices=["auto", "off", "constant", "section"],
                        help="bed moving under the bottom track: auto (with a moving reference a constant bed, kept only "
                             "when a test says it moves), off (a bed verified fixed), constant, or section (a function "
@@ -881,7 +888,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = command("bench", "benchmarks with their targets", cmd_bench)
     s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis",
-                                     "compliance"],
+                                     "compliance", "navigation"],
                    help="which benchmark")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results", help="folder of the results")

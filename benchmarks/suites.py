@@ -16,7 +16,8 @@ from ..models.rotations import course_difference_rad
 from .common import machine as _machine
 from .common import marked_span, replace_marked_block, save_figure, write_json, write_text
 
-SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis", "compliance")
+SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis", "compliance",
+          "navigation")
 
 
 def _calibrate(case, **kw):
@@ -351,6 +352,10 @@ def _suite(suite: str, quick: bool):
         from .diagnosis_real import bench_diagnosis, figure_diagnosis, print_diagnosis
 
         return bench_diagnosis(quick), print_diagnosis, figure_diagnosis
+    if suite == "navigation":
+        from .navigation_real import bench_navigation, figure_navigation, print_navigation
+
+        return bench_navigation(quick), print_navigation, figure_navigation
     if suite == "survey":
         from .survey import bench_survey, figure_survey, print_survey
 

@@ -27,6 +27,7 @@ dropped), so noise levels, chi-square, standard errors and residual colour are p
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -48,6 +49,8 @@ from .formulations import AXES, lever_block
 from .row_jacobian import RowBlock, RowJacobian
 
 GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference", "motion", "vertical")
+PRIOR_GROUPS = ("motion", "vertical")  # pseudo-observations of priors (the walk's increments, heave's levels), not data
+VELOCITY_NAME = re.compile(r"V\d+_[xyz]")  # a navigation velocity unknown (V<knot>_<axis>, after any run prefix)
 NED = ("north", "east", "down")
 ATTITUDE_SOURCES = ("model", "samples", "frozen")
 MOVING_BEDS = ("off", "constant", "section")
@@ -838,6 +841,17 @@ class SurveyModel:
     def prior_rows(self) -> np.ndarray:
         """Mask of the prior's pseudo-residual rows (their information is known, not sampled)."""
         return self.row_run == len(self.runs)
+
+    @property
+    def known_rows(self) -> np.ndarray:
+        """Rows whose information is known, not sampled: the compass prior's and the random walk's
+        pseudo-observations (its increments, the vertical velocity's levels)."""
+        walk = [i for i, key in enumerate(self.sigma_keys) if key[1] in PRIOR_GROUPS]
+        return self.prior_rows | np.isin(self.row_sigma, walk)
+
+    def velocity_columns(self) -> np.ndarray:
+        """Mask of the unknowns that are navigation velocities (each row touches a few neighbours)."""
+        return np.array([VELOCITY_NAME.fullmatch(n.split("/")[-1]) is not None for n in self.unknowns.names], dtype=bool)
 
     # ------------------------------------------------------------------ bookkeeping
     def channel_slices(self) -> dict:

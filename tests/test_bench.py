@@ -87,3 +87,38 @@ def test_survey_day_targets_follow_the_rows(capsys):
     print_survey_day(slow)
     assert [t["met"] for t in slow["targets"]] == [False, False, False]
     assert "worker exited with status 1: boom" in capsys.readouterr().out
+
+
+def test_navigation_window_check_is_the_weighted_spread_about_the_mean(capsys, monkeypatch):
+    """bench navigation's window check: chi2/dof of estimates about their inverse-variance mean,
+    against a hand computation; its target follows the number; a missing real file is listed."""
+    from types import SimpleNamespace
+
+    from adcpdyn.benchmarks import navigation_real as nav
+
+    est = {1: (1.0, 0.5), 2: (2.0, 0.5), 3: (4.0, 1.0)}  # window -> (deg, SE deg)
+    calls = iter(est.values())
+
+    def fake(cases, navigation, starts, **options):
+        if options:  # a window: compass deviation and bed left out
+            assert options == {"compass_deviation": "off", "moving_bed": "off"}
+        m, s = next(calls) if options else (0.0, 1.0)
+        r = SimpleNamespace(heading_misalignment_rad=np.radians(m), heading_misalignment_se_rad=np.radians(s),
+                            moving_bed_velocity_se_m_s=None, noise_sigma={"bt": 0.01}, multistart=SimpleNamespace(status="ok"))
+        return r, 0.1
+
+    monkeypatch.setattr(nav, "_calibrate", fake)
+    monkeypatch.setattr(nav, "NAVIGATIONS", ("knots",))
+    monkeypatch.setattr(nav, "WINDOWS", {"RiverPro_test01.PD0": (3, None)})
+    res = nav.bench_navigation(quick=True)
+    if res["missing"]:
+        assert res["files"] == [] and "RiverPro_test01.PD0" in res["missing"][0]
+        return
+    w = np.array([4.0, 4.0, 1.0])
+    m = np.array([1.0, 2.0, 4.0])
+    mean = np.sum(w * m) / np.sum(w)
+    [window] = res["windows"]
+    assert window["chi2_per_dof"] == pytest.approx(np.sum(w * (m - mean) ** 2) / 2, rel=1e-9)
+    nav.print_navigation(res)
+    assert [t["met"] for t in res["targets"]] == [window["chi2_per_dof"] <= nav.COVERED_CHI2]
+    assert "| RiverPro_test01.PD0 | knots | +1.00 +- 0.50, +2.00 +- 0.50, +4.00 +- 1.00 |" in capsys.readouterr().out

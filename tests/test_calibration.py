@@ -211,6 +211,29 @@ def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
     assert r.to_dict()["installation_ypr_rad"][1] is None  # null in CALIB.json
 
 
+def test_random_walk_calibration_finds_the_installation_with_a_velocity_per_ping(lake_case):
+    """navigation random_walk (a velocity at every ping, its intensity and the noise levels by
+    variance components): the installation angles within 3 SE of truth on the sensor's samples, a
+    walk intensity and vertical level among the noise levels, velocities at the pings; the assembled
+    Jacobian, knots-only, is refused in one line."""
+    case = lake_case
+    r = _quiet_calibrate(case, formulation="minimal", n_starts=2, timing="shallow", attitude="samples",
+                         moving_bed="off", navigation="random_walk")
+    assert r.success and r.jacobian == "symbolic"
+    z = (r.installation_ypr_rad - case.truth.installation_ypr_rad) / r.installation_ypr_se_rad
+    assert np.all(np.abs(z) < Z_MAX)
+    assert r.installation_ypr_se_rad[0] < np.deg2rad(0.2)
+    assert 0 < r.noise_sigma["motion"] < 1.0 and 0 < r.noise_sigma["vertical"] < 1.0
+    np.testing.assert_allclose(r.runs[0].velocity_knots_s, case.pings.time_s)
+    auto = CalibrationProblem(case, CalibrationConfig(n_starts=1, timing="shallow", navigation="auto"))
+    assert [run.navigation for run in auto.runs] == ["knots"]  # a motion model follows this run's attitude
+    with pytest.raises(ValueError, match="CalibrationConfig.jacobian: 'assembled' is for knot navigation"):
+        CalibrationProblem(case, CalibrationConfig(n_starts=1, attitude="samples", navigation="random_walk",
+                                                   jacobian="assembled"))
+    with pytest.raises(ValueError, match="CalibrationConfig.navigation: expected one of"):
+        CalibrationConfig(navigation="spline")
+
+
 def test_head_sensor_heading_misalignment_against_reference_and_applied_by_correct():
     """A head compass reading 25 degrees too far clockwise: calibration finds -25 degrees and the
     static correction with that CALIB.json follows the true course, while without it it does not."""

@@ -11,7 +11,7 @@ import pytest
 import scipy.sparse as sp
 from conftest import refit_without
 
-from adcpdyn.estimators.diagnosis.normal_equations import (leave_out_predictions, log_det_normal, marginal_covariance,
+from adcpdyn.estimators.statistics.normal_equations import (leave_out_predictions, log_det_normal, marginal_covariance,
                                                            quadratic_diagonal, factor, redundancy)
 
 
@@ -45,7 +45,7 @@ def test_random_walk_likelihood_is_marginal_over_the_velocities():
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
     from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, fit_base
-    from adcpdyn.estimators.diagnosis.model import VELOCITY_NAME
+    from adcpdyn.estimators.measurement_model import VELOCITY_NAME
 
     sc = get_scenario("diag_boat")
     case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=2)
@@ -70,7 +70,7 @@ def test_banded_selected_inversion_equals_the_dense_inverse():
     """Velocities per ping (each row on one or two neighbouring knots) plus global unknowns: the
     leverages by the band of B^-1 and a Schur complement equal diag(J A^-1 J^T) computed densely,
     and a wide band falls back to the solves."""
-    from adcpdyn.estimators.diagnosis.normal_equations import arrow_leverages, band_of_inverse, leverages, ridged
+    from adcpdyn.estimators.statistics.normal_equations import arrow_leverages, band_of_inverse, leverages, ridged
     from scipy.linalg import cholesky_banded
 
     rng = np.random.default_rng(3)

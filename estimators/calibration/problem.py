@@ -39,8 +39,9 @@ from ...solvers.multistart import MultistartResult, SolverOptions, build_solver,
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..formulations import FORMULATIONS
 from ..statistics.hac import at_least_white, ping_bins, sandwich
-from ..measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, course_offset_rad, default_threads,
-                                 heading_span, knot_times)
+from ..measurement_model import (ANGLE_NAMES, NAVIGATIONS, ModelSpec, RunSetup, SurveyModel, choose_navigation,
+                                 course_offset_rad, default_threads, heading_span, knot_times, ping_knots)
+from ..statistics.normal_equations import redundancy
 from ..statistics.uncertainty import uncertainty
 from .moving_bed_decision import mean_flow_speed, moving_bed_test
 from .result import CalibrationResult, RunResult
@@ -62,6 +63,7 @@ ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is
 MOVING_BED_CHOICES = ("auto", "off", "constant", "section")
 DEVIATION_CHOICES = ("auto", "on", "off")
 SE_METHODS = ("hac", "white")
+VCE_ITERATIONS = 3  # variance-component re-estimations of a random-walk calibration (each with a refit)
 MIN_HEADING_SPAN = 0.1  # heading_span above which the one-cycle compass deviation is estimated (0.5: all round)
 CONFOUNDED_R2 = 0.9  # share of a yaw's variance explained by the bed's: the two are not told apart
 
@@ -90,6 +92,13 @@ class CalibrationConfig:
         Re-estimate each channel's noise from the residuals and solve again.
     velocity_knot_interval_s : float, optional
         Spacing of the navigation-velocity knots (default: from the data rates).
+    navigation : str
+        The vessel's velocity: ``knots`` (piecewise-linear between knots), ``random_walk`` (a
+        velocity at every ping under a random-walk prior, its intensity and every noise level
+        from the data by variance components: a real boat's speed changes between two fixes are
+        motion, which the bottom track sees and a smooth curve does not) or ``auto`` (the random
+        walk for a run under way on a moving reference whose beams take the sensor's samples, as a
+        real file's do; knots otherwise: :func:`~adcpdyn.estimators.measurement_model.choose_navigation`).
     lever_box_m : float, optional
         Bound on every lever-arm coordinate (default: half the vessel length, else 10 m).
     installation_bound_rad : float
@@ -165,6 +174,7 @@ class CalibrationConfig:
     modes: int | None = None
     estimate_noise: bool = True
     velocity_knot_interval_s: float | None = None
+    navigation: str = "knots"
     lever_box_m: float | None = None
     installation_bound_rad: float = float(np.deg2rad(15.0))
     nominal_installation_ypr_rad: tuple = (0.0, 0.0, 0.0)
@@ -186,7 +196,7 @@ class CalibrationConfig:
         for name, allowed in (("formulation", FORMULATIONS), ("timing", TIMINGS), ("method", METHODS),
                               ("tangential", TANGENTIALS), ("attitude", ATTITUDES), ("jacobian", JACOBIANS),
                               ("moving_bed", MOVING_BED_CHOICES), ("compass_deviation", DEVIATION_CHOICES),
-                              ("standard_errors", SE_METHODS)):
+                              ("standard_errors", SE_METHODS), ("navigation", NAVIGATIONS + ("auto",))):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"CalibrationConfig.{name}: expected one of {list(allowed)}, got {getattr(self, name)!r}")
         if not 0 < float(self.compass_deviation_prior_rad) <= 0.5:
@@ -276,10 +286,15 @@ class CalibrationProblem:
         runs = []
         for case, f in zip(self.cases, self.fits):
             source, reason = ("frozen", "two-stage method") if self.two_stage else choose_attitude(case, f, config.attitude)
-            knots = knot_times(case, config.velocity_knot_interval_s)
+            navigation = choose_navigation(case, source, config.navigation)
+            knots = ping_knots(case) if navigation == "random_walk" else knot_times(case, config.velocity_knot_interval_s)
             runs.append(RunSetup(case, f, source, choose_timing(case, f, config.timing), knots,
-                                 config.use_ranges and case.pings.bt_range_m is not None, reason))
+                                 config.use_ranges and case.pings.bt_range_m is not None, reason, navigation=navigation))
         self.runs = runs
+        self.walk = any(r.random_walk for r in runs)
+        if self.walk and config.jacobian == "assembled":
+            raise ValueError("CalibrationConfig.jacobian: 'assembled' is for knot navigation; a random-walk one (navigation "
+                             f"{config.navigation!r} on these runs) uses 'symbolic' or 'auto'")
         self.frame = self.cases[0].attitude.frame
         self.head_sensor = self.frame == "transducer"
         moving = any(r.moving_reference for r in runs)
@@ -319,8 +334,8 @@ class CalibrationProblem:
         x = model.x
         z = ca.MX.sym("z", x.shape[0])
         raw = model.raw
-        self.assembled = config.jacobian == "assembled" or (config.jacobian == "auto"
-                                                            and model.assembled_nodes > ASSEMBLED_MIN_NODES)
+        self.assembled = not self.walk and (config.jacobian == "assembled" or (
+            config.jacobian == "auto" and model.assembled_nodes > ASSEMBLED_MIN_NODES))
         self.threads = default_threads(config.workers, config.n_starts) if self.assembled else 1
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
         weights = ca.MX.sym("w", raw.shape[0])
@@ -452,14 +467,35 @@ class CalibrationProblem:
             ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
                             make_solver=make, warm_start=cfg.solver.warm_start)
         if cfg.estimate_noise:
-            _, raw = self.residual_fun(ms.x, self.weights())
-            self.sigma = self.model.reestimate_sigmas(np.asarray(raw), len(ms.x), self.sigma)
-            refit = multistart(self.solver, ms.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)
+            refit = ms
+            for _ in range(VCE_ITERATIONS if self.walk else 1):
+                self.sigma = self._noise_levels(refit.x)
+                refit = multistart(self.solver, refit.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)
             # the per-start table stays that of the multistart; the final solve is the refit
             ms = MultistartResult(**{**ms.__dict__, "x": refit.x, "objective": refit.objective, "success": refit.success,
                                      "status": refit.status, "iterations": refit.iterations, "lam_g": refit.lam_g,
                                      "g": refit.g, "message": ms.message + f"; noise re-estimated, refit: {refit.status}"})
         return self._result(ms)
+
+    def _noise_levels(self, z: np.ndarray) -> dict:
+        """Each (run, group)'s noise level from the residuals at ``z``: on knots, the RMS with the
+        degrees of freedom shared out; with a random walk, its residuals over their redundancy
+        (Helmert / Foerstner variance components, the walk's intensity one of them: REML for a
+        linear-Gaussian walk), since a velocity per ping takes up a share of each group that
+        differs from group to group."""
+        e, raw = (np.asarray(a).ravel() for a in self.residual_fun(z, self.weights()))
+        if not self.walk:
+            return self.model.reestimate_sigmas(raw, len(z), self.sigma)
+        model = self.model
+        J = self.jacobian_fun(z, self.weights()).sparse()
+        used = model.mask > 0
+        r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=model.velocity_columns())
+        out = dict(self.sigma)
+        for i, key in enumerate(model.sigma_keys):
+            m = (model.row_sigma == i) & used
+            if key[1] != "prior" and m.sum() > 3 and r[i] > 1.0:
+                out[key] = float(max(np.sqrt(np.sum(raw[m] ** 2) / r[i]), 1e-6))
+        return out
 
     # ------------------------------------------------------------------ result
     def _result(self, ms: MultistartResult) -> CalibrationResult:
@@ -467,7 +503,8 @@ class CalibrationProblem:
         w = self.weights()
         e = np.asarray(self.residual_fun(ms.x, w)[0]).ravel()
         J = self.jacobian_fun(ms.x, w)
-        J = J.tocsr() if self.assembled else np.asarray(J)  # an assembled one stays sparse (rows x unknowns)
+        # an assembled one stays sparse (rows x unknowns), and a random walk's (a velocity per ping)
+        J = J.tocsr() if self.assembled else J.sparse().tocsr() if self.walk else np.asarray(J)
         r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))
@@ -516,7 +553,9 @@ class CalibrationProblem:
             nominal = np.asarray(cfg.nominal_installation_ypr_rad, dtype=float)
             Ltb = np.asarray(euler_matrix(*nominal))
             radius = r_s @ Ltb.T
-            radius_se = np.sqrt((se_r**2) @ (Ltb.T**2))
+            weights = Ltb.T**2  # a component not determined (inf) spreads only where the rotation takes it
+            radius_se = np.sqrt(np.where(np.isfinite(se_r), se_r, 0.0) ** 2 @ weights)
+            radius_se[(~np.isfinite(se_r)).astype(float) @ (weights > 0) > 0] = np.inf
             ypr, ypr_se = nominal, np.full(3, np.inf)
             if self.head_yaw:
                 i = u.index("heading")[0]
@@ -603,7 +642,7 @@ class CalibrationProblem:
         if self.config.standard_errors == "white" or Q.size == 0:
             return white, info
         sw = sandwich(J, e, unc.cov_z[:, Q], self.model.row_run, self.model.row_time,
-                      ping_bins([run.case for run in self.runs]), known=self.model.prior_rows)
+                      ping_bins([run.case for run in self.runs]), known=self.model.known_rows)
         d_w = np.diag(white)
         cov = at_least_white(sw.cov, d_w)
         inflation = np.sqrt(np.diag(cov) / np.where(d_w > 0, d_w, np.inf))

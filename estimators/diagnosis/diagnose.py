@@ -48,7 +48,7 @@ from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, c
                                  knot_times, ping_knots)
 from . import where as where_mod
 from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
-from .normal_equations import as_sparse, inverse_columns, leave_out_predictions, marginal_covariance, redundancy
+from ..statistics.normal_equations import as_sparse, inverse_columns, leave_out_predictions, marginal_covariance, redundancy
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "vertical")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")

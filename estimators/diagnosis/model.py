@@ -17,7 +17,6 @@ re-estimated without rebuilding.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -26,11 +25,9 @@ import scipy.sparse as sp
 
 from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import periodogram_peak
-from ..measurement_model import EffectTerm, ModelSpec, SurveyModel, channel_slices, hat_basis
-from .normal_equations import as_sparse, log_det_normal
+from ..measurement_model import PRIOR_GROUPS, VELOCITY_NAME, EffectTerm, ModelSpec, SurveyModel, channel_slices, hat_basis
+from ..statistics.normal_equations import as_sparse, log_det_normal
 
-VELOCITY_NAME = re.compile(r"V\d+_[xyz]")  # a navigation velocity unknown (V<knot>_<axis>)
-PRIOR_GROUPS = ("motion", "vertical")  # pseudo-observations of priors (the walk's increments, heave's levels), not data
 
 
 def group_of(channel: str) -> str:

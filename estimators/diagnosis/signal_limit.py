@@ -15,7 +15,7 @@ from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, base_from, hac_of_columns
 from .field_errors import FIELD_ERRORS, inject
 from .model import Fit, GapModel, free_jacobian
-from .normal_equations import as_sparse, inverse_columns
+from ..statistics.normal_equations import as_sparse, inverse_columns
 
 SEARCH = (1.0 / 16.0, 4.0)  # sizes searched: from the smallest typical one over 16 to the largest times 4
 BISECTIONS = 7  # the search spans about 7 octaves: a limit to about 5 %
