@@ -321,3 +321,19 @@ def test_other_bench_figures_label_their_axes_with_units(monkeypatch):
             assert re.search(r"\((s|MB|mm/s|fraction|pings)\)$", ax.get_ylabel()), ax.get_ylabel()
             assert ax.get_xlabel(), name
         assert not _fonts_at_least(fig, MIN_FONT_PT), name
+
+
+def test_weak_directions_are_said_in_words():
+    """A weakly determined direction is named by its largest unknowns (trading off, together, one
+    alone, a mix), the coefficients kept in brackets."""
+    import numpy as np
+
+    from adcpdyn.estimators.statistics.uncertainty import _describe
+
+    names = ["compass_deviation_cos", "compass_deviation_sin", "heading_misalignment", "moving_bed_north"]
+    assert _describe(np.array([0.82, -0.55, 0.1, 0.06]), names, {}).startswith(
+        "compass deviation cos against compass deviation sin (one up and the other down fits as well) (+0.82")
+    assert _describe(np.array([0.1, 0.0, 0.72, 0.69]), names, {}).startswith(
+        "heading misalignment and moving bed north together")
+    assert _describe(np.array([0.99, 0.1, 0.0, 0.0]), names, {}).startswith("compass deviation cos alone")
+    assert _describe(np.array([0.5, 0.5, 0.5, 0.5]), names, {}).startswith("a mix of ")

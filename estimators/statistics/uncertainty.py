@@ -76,7 +76,20 @@ def _describe(vec_x: np.ndarray, names: list, context: dict) -> str:
         return f"installation angle {names[big[0]].split('_')[1]} ({text})"
     if all(names[i].startswith(("roll", "pitch", "yaw")) for i in big[:2]):
         return f"attitude-model parameters ({text})"
-    return text
+    return f"{_in_words(v, names, big)} ({text})"
+
+
+def _in_words(v: np.ndarray, names: list, big: np.ndarray) -> str:
+    """A direction by its largest unknowns: two that trade off or move together, else a mix."""
+    word = lambda i: names[i].replace("_", " ")
+    a, b = big[0], big[1] if big.size > 1 else big[0]
+    if big.size == 1 or v[a] ** 2 > 0.9:
+        return f"{word(a)} alone"
+    if v[a] ** 2 + v[b] ** 2 > 0.8:
+        if np.sign(v[a]) != np.sign(v[b]):
+            return f"{word(a)} against {word(b)} (one up and the other down fits as well)"
+        return f"{word(a)} and {word(b)} together"
+    return "a mix of " + ", ".join(word(i) for i in big[:3] if abs(v[i]) > 0.05)
 
 
 def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndarray, context: dict | None = None) -> Uncertainty:
