@@ -1,6 +1,7 @@
 #!/bin/bash
 # Every importable real file through import, calibrate, compare, correct and diagnose, with
-# wall times and exit codes: benchmarks/real_data.sh [OUT_DIR] (default /tmp/adcpdyn-real).
+# wall times and exit codes, then the docs/real-data.md table (OUT_DIR/table.md):
+# benchmarks/real_data.sh [OUT_DIR] (default /tmp/adcpdyn-real).
 # Exit code 2 is a one-line refusal (e.g. nothing to compare against); a traceback is reported.
 cd "$(dirname "$0")/.."
 R=${ADCPDYN_REAL_DATA:-../shared/data/real}
@@ -24,3 +25,5 @@ for f in RiverPro_test01.PD0 winriver01.PD0 winriver02_transect.PD0 RDI_withBT.0
     if grep -q "Traceback" "$d/$step.log"; then echo "$n $step TRACEBACK" | tee -a "$OUT/summary.txt"; fi
   done
 done
+# the docs/real-data.md table, from what was written above
+.venv/bin/python -m adcpdyn.benchmarks.real_table "$OUT" | tee "$OUT/table.md"

@@ -82,3 +82,39 @@ def test_readme_measured_table_reads_the_committed_runs():
                    f"RiverPro); a two-run survey of winriver02 {survey['random_walk']['misalignment_se_deg']:.2f} vs "
                    f"{survey['knots']['misalignment_se_deg']:.2f} deg"):
         assert figure in readme
+
+
+def test_real_table_reads_what_real_data_sh_wrote(tmp_path):
+    """benchmarks/real_table.py on a folder laid out as real_data.sh writes it: the summary's times,
+    CALIB.json's misalignment (deg, with declination and compass error), bed test, deviation and
+    lever arms, compare's errors, diagnose's verdict; a refused diagnose quoted by its one line."""
+    import math
+
+    from adcpdyn.benchmarks.real_table import table
+
+    (tmp_path / "summary.txt").write_text("A calibrate exit 0, 2.5 s\nA diagnose exit 0, 8.1 s\n"
+                                          "B calibrate exit 0, 1.0 s\nB compare exit 2, 0.9 s\nB diagnose exit 2, 0.9 s\n")
+    a = tmp_path / "A"
+    (a / "cmp").mkdir(parents=True)
+    rad = math.radians
+    (a / "calib.json").write_text(json.dumps({
+        "solver": {"status": "Solve_Succeeded"}, "heading_misalignment_rad": rad(0.39), "heading_misalignment_se_rad": rad(1.98),
+        "magnetic_declination_rad": rad(15.61), "compass_error_rad": rad(-15.22),
+        "moving_bed_test": {"decision": "moving", "percent_of_flow": 7.0}, "moving_bed_velocity_m_s": [-0.083, 0.031],
+        "moving_bed_velocity_se_m_s": [0.027, 0.013], "compass_deviation_rad": {"sin": rad(0.2), "cos": rad(-0.3)},
+        "compass_deviation_se_rad": {"sin": rad(1.0), "cos": rad(1.1)}, "radius_vectors_head_m": [[0.1, 0.2, 0.3]] * 4,
+        "radius_vectors_head_se_m": [[0.01, 0.02, None]] * 4,
+        "runs": [{"transducer_depth_offset_m": 0.003, "transducer_depth_offset_se_m": 0.011}]}))
+    (a / "cmp" / "A_compare.json").write_text(json.dumps({"asc": {"vector_error_rms_m_s": 0.211, "direction_error_rms_deg": 17.3},
+                                                          "not_run": {"adc": "lever arms null"}}))
+    (a / "diag.json").write_text(json.dumps({"verdict": "none", "gap_before": 0.147, "gap_z_before": 5.1,
+                                             "where": [{"channel": "reference_north"}]}))
+    b = tmp_path / "B"
+    b.mkdir()
+    (b / "diagnose.log").write_text("adcpdyn diagnose: error: B: /attitude: never changes\n")
+    rows = table(tmp_path).splitlines()
+    assert rows[2] == ("| A | Solve_Succeeded, 2.5 | +0.39 +- 1.98 [+15.61; -15.22] | moving (7.0 % of the flow); -0.083 +- 0.027, "
+                       "+0.031 +- 0.013 | +0.2 +- 1.0, -0.3 +- 1.1 | x +0.100 +- 0.010, y +0.200 +- 0.020, z +0.300 +- n.d. | "
+                       "ASC 0.211 m/s / 17.3 deg; refused: adc | none, 0.147 (z = 5.1), reference_north; 8.1 |")
+    assert rows[3].startswith("| B | exit 0 |") and "exit 2 (one line: adcpdyn diagnose: error: B: /attitude: never changes)" in rows[3]
+    assert rows[-1].endswith("A +0.003 +- 0.011 m.")

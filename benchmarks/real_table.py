@@ -1,0 +1,127 @@
+"""The real-file table of docs/real-data.md, from what ``benchmarks/real_data.sh OUT`` wrote:
+``python -m adcpdyn.benchmarks.real_table OUT`` prints it (markdown), so the page is pasted from a
+run, never typed. Per file: calibrate's status and time, the heading misalignment with the IGRF
+declination and the compass error, the moving-bed test and bed, the compass deviation, the
+head-frame lever arms, the corrections against GNSS (compare), and diagnose's verdict, held-out
+gap and worst channel with its time."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import sys
+from pathlib import Path
+
+STEPS = ("import", "calibrate", "compare", "correct", "diagnose")
+
+
+def _times(out: Path) -> dict:
+    """{(file, step): (exit status, seconds)} from the script's summary.txt."""
+    found = {}
+    for line in (out / "summary.txt").read_text().splitlines():
+        m = re.fullmatch(r"(\S+) (\w+) exit (\d+), ([\d.]+) s", line.strip())
+        if m:
+            found[(m[1], m[2])] = (int(m[3]), float(m[4]))
+    return found
+
+
+def _deg(x) -> float:
+    return math.degrees(x) if x is not None else math.nan
+
+
+def _pm(value, se, digits=2, scale=1.0) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    se_text = "n.d." if se is None or not math.isfinite(se) else f"{se * scale:.{digits}f}"
+    return f"{value * scale:+.{digits}f} +- {se_text}"
+
+
+def _calibration(c: dict) -> list:
+    m = c.get("heading_misalignment_rad")
+    mis = "no reference" if m is None else _pm(_deg(m), _deg(c.get("heading_misalignment_se_rad")))
+    if m is not None and c.get("magnetic_declination_rad") is not None:
+        mis += f" [{_deg(c['magnetic_declination_rad']):+.2f}; {_deg(c.get('compass_error_rad')):+.2f}]"
+    test = c.get("moving_bed_test") or {}
+    bed = c.get("moving_bed_velocity_m_s")
+    bed_se = c.get("moving_bed_velocity_se_m_s") or [None, None]
+    model = c.get("moving_bed")
+    model = model.get("model", "-") if isinstance(model, dict) else (model or "-")
+    bed_text = f"{test['decision']} ({test.get('percent_of_flow', math.nan):.1f} % of the flow)" if test else model
+    if bed:
+        bed_text += "; " + ", ".join(_pm(v, s, 3) for v, s in zip(bed, bed_se))
+    dev, dev_se = c.get("compass_deviation_rad"), c.get("compass_deviation_se_rad") or {}
+    if isinstance(dev, dict):  # CALIB.json: {"sin": B, "cos": C, ...}
+        dev, dev_se = [dev["sin"], dev["cos"]], [dev_se.get("sin"), dev_se.get("cos")]
+    dev_text = "-" if not dev else ", ".join(_pm(_deg(v), _deg(s) if s is not None else None, 1) for v, s in zip(dev, dev_se))
+    head = c.get("radius_vectors_head_m")
+    head_se = c.get("radius_vectors_head_se_m")
+    if head is None or head_se is None or all(s is None or not math.isfinite(s) for s in head_se[0]):
+        lever = "not determined"
+    else:
+        lever = ", ".join(f"{a} {_pm(v, s, 3)}" for a, v, s in zip("xyz", head[0], head_se[0]))
+    return [mis, bed_text, dev_text, lever]
+
+
+def _comparison(cmp: dict) -> str:
+    parts = []
+    for method in ("asc", "adc", "rootfinder"):
+        m = cmp.get(method)
+        if m:
+            parts.append(f"{method.upper() if method != 'rootfinder' else 'rootfinder'} {m['vector_error_rms_m_s']:.3f} m/s / "
+                         f"{m['direction_error_rms_deg']:.1f} deg")
+    refused = cmp.get("not_run") or {}
+    if refused:
+        parts.append("refused: " + ", ".join(sorted(refused)))
+    return "; ".join(parts) or "-"
+
+
+def table(out) -> str:
+    out = Path(out)
+    times = _times(out)
+    lines = ["| case | calibrate (status, s) | heading misalignment (deg) [IGRF declination; compass error] | moving-bed "
+             "test; bed north, east (m/s) | compass deviation B, C (deg) | lever arm, head frame (m) | against GNSS "
+             "(vector / direction error) | diagnose: verdict, held-out gap (z), worst channel; s |",
+             "|---|---|---|---|---|---|---|---|"]
+    for folder in sorted(p for p in out.iterdir() if p.is_dir()):
+        name = folder.name
+        row = [name]
+        calib = folder / "calib.json"
+        status = {s: times.get((name, s), (None, math.nan)) for s in STEPS}
+        if calib.exists():
+            c = json.loads(calib.read_text())
+            solver = c.get("solver") or {}
+            row.append(f"{solver.get('status', '?')}, {status['calibrate'][1]:.1f}")
+            row += _calibration(c)
+        else:
+            row += [f"exit {status['calibrate'][0]}"] + ["-"] * 4
+        cmp = next(iter((folder / "cmp").glob("*_compare.json")), None) if (folder / "cmp").is_dir() else None
+        row.append(_comparison(json.loads(cmp.read_text())) if cmp else f"compare exit {status['compare'][0]}")
+        diag = folder / "diag.json"
+        if diag.exists():
+            d = json.loads(diag.read_text())
+            worst = d["where"][0]["channel"] if d.get("where") else "-"
+            row.append(f"{d['verdict']}, {d['gap_before']:.3f} (z = {d['gap_z_before']:.1f}), {worst}; "
+                       f"{status['diagnose'][1]:.1f}")
+        else:
+            row.append(f"exit {status['diagnose'][0]} (one line: {_first_line(folder / 'diagnose.log')})")
+        lines.append("| " + " | ".join(row) + " |")
+    offsets = []
+    for folder in sorted(p for p in out.iterdir() if p.is_dir() and (p / "calib.json").exists()):
+        run = json.loads((folder / "calib.json").read_text())["runs"][0]
+        if run.get("transducer_depth_offset_m") is not None:
+            offsets.append(f"{folder.name} {_pm(run['transducer_depth_offset_m'], run.get('transducer_depth_offset_se_m'), 3)} m")
+    if offsets:
+        lines += ["", "The transducer-depth offset the slant ranges give (`runs[].transducer_depth_offset_m`): "
+                  + "; ".join(offsets) + "."]
+    return "\n".join(lines)
+
+
+def _first_line(log: Path) -> str:
+    text = log.read_text().strip().splitlines() if log.exists() else []
+    errors = [t for t in text if "error:" in t]
+    return (errors[-1] if errors else (text[-1] if text else "")).replace("|", "/")[:120]
+
+
+if __name__ == "__main__":
+    print(table(sys.argv[1] if len(sys.argv) > 1 else "/tmp/adcpdyn-real"))
