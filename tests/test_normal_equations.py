@@ -438,3 +438,40 @@ def test_detection_limit_is_the_size_the_selection_takes():
     assert detection_limit("moving_bed_m_s", {"moving_bed.velocity_north_m_s": 0.02, "moving_bed.velocity_east_m_s": 0.05}) == 0.05
     assert detection_limit("heave_m_s", {"heave.cos_m": 0.01}) is None  # frequency-dependent: not claimed
     assert detection_limit("tilt_lowpass_s", {"tilt_lowpass.tau_s": 0.1}) is None  # its linearisation is optimistic
+
+
+def test_eliminating_local_unknowns_gives_the_dense_uncertainty():
+    """uncertainty_eliminating (the velocities per ping eliminated by a Schur complement) equals the
+    dense uncertainty: every SE, the covariance columns of the kept unknowns, and which derived
+    quantities an undetermined direction leaves undetermined (a constraint on the kept ones, and a
+    kept unknown no row touches)."""
+    from adcpdyn.estimators.statistics.uncertainty import uncertainty, uncertainty_eliminating
+
+    rng = np.random.default_rng(3)
+    n_v, n_s = 30, 4  # a walk of 30 velocities (banded rows) and 4 shared unknowns, the last one in no row
+    rows = []
+    for j in range(n_v):  # a measurement of each velocity with the shared unknowns, and the walk's increments
+        r = np.zeros(n_v + n_s)
+        r[j], r[n_v:n_v + 3] = 1.0, rng.normal(size=3)
+        rows.append(r)
+        if j:
+            d = np.zeros(n_v + n_s)
+            d[j], d[j - 1] = 2.0, -2.0
+            rows.append(d)
+    J = np.array(rows)
+    A = np.zeros((1, n_v + n_s))
+    A[0, n_v], A[0, n_v + 1] = 1.0, -1.0  # the first two shared unknowns tied together
+    names = [f"V{j}_x" for j in range(n_v)] + ["a", "b", "c", "d"]
+    scale = np.ones(n_v + n_s)
+    local = np.arange(n_v + n_s) < n_v
+    dense = uncertainty(J, A, names, scale)
+    elim = uncertainty_eliminating(sp.csr_matrix(J), A, names, scale, local)
+    finite = np.isfinite(dense.se_z)
+    assert np.array_equal(finite, np.isfinite(elim.se_z)) and not finite[-1]
+    np.testing.assert_allclose(elim.se_z[finite], dense.se_z[finite], rtol=1e-8)
+    kept = np.arange(n_v, n_v + 3)
+    np.testing.assert_allclose(elim.cov_columns(kept), dense.cov_z[:, kept], rtol=1e-7, atol=1e-12)
+    derived = np.eye(n_v + n_s)[[n_v, n_v + 2, n_v + 3]]  # a, c, d: d is not determined
+    assert list(elim.determined_mask(derived)) == list(dense.determined_mask(derived)) == [True, True, False]
+    with pytest.raises(ValueError, match="only the unknowns kept"):
+        elim.cov_columns([0])

@@ -42,7 +42,7 @@ from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..measurement_model import (ANGLE_NAMES, NAVIGATIONS, ModelSpec, RunSetup, SurveyModel, choose_navigation,
                                  course_offset_rad, default_threads, heading_span, knot_times, ping_knots)
 from ..statistics.normal_equations import redundancy
-from ..statistics.uncertainty import uncertainty
+from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
 from .moving_bed_decision import mean_flow_speed, moving_bed_test
 from .result import CalibrationResult, RunResult
 
@@ -508,8 +508,12 @@ class CalibrationProblem:
         r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))
-        unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale,
-                          {"beam_dirs_sensor": model.beam_dirs_t @ Lst.T, "frame": self.frame})
+        context = {"beam_dirs_sensor": model.beam_dirs_t @ Lst.T, "frame": self.frame}
+        if self.walk:  # a velocity per ping: eliminated first, nothing of size unknowns x unknowns formed
+            unc = uncertainty_eliminating(J, Jg[eq] if eq.any() else None, self.names, self.scale,
+                                          model.velocity_columns(), context)
+        else:
+            unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale, context)
         x = ms.x * self.scale
         # Standard errors of the shared unknowns Q: Newey-West sandwich, never below white noise's.
         Q = np.concatenate([u.index(k) for k in ("heading", "installation", "lever", "moving_bed")])
@@ -637,11 +641,12 @@ class CalibrationProblem:
     def _shared_covariance(self, J, e, unc, Q) -> tuple[np.ndarray, dict]:
         """Covariance of the shared unknowns (scaled): HAC, inflated where needed to at least
         the white-noise covariance's diagonal; and how it was formed."""
-        white = unc.cov_z[np.ix_(Q, Q)]
+        cov_Q = unc.cov_columns(Q)
+        white = cov_Q[Q]
         info = {"method": self.config.standard_errors}
         if self.config.standard_errors == "white" or Q.size == 0:
             return white, info
-        sw = sandwich(J, e, unc.cov_z[:, Q], self.model.row_run, self.model.row_time,
+        sw = sandwich(J, e, cov_Q, self.model.row_run, self.model.row_time,
                       ping_bins([run.case for run in self.runs]), known=self.model.known_rows)
         d_w = np.diag(white)
         cov = at_least_white(sw.cov, d_w)
@@ -695,10 +700,9 @@ class CalibrationProblem:
         if not np.isfinite(unc.se_z[i]):
             share = 1.0
         else:
-            C = unc.cov_z
-            c_yb = C[i, bed]
-            C_bb = C[np.ix_(bed, bed)]
-            share = float(c_yb @ np.linalg.pinv(C_bb) @ c_yb / C[i, i]) if C[i, i] > 0 else 0.0
+            C = unc.cov_columns(np.concatenate([[i], bed]))  # every unknown with the yaw and the bed
+            c_yb, C_bb = C[i, 1:], C[bed, 1:]
+            share = float(c_yb @ np.linalg.pinv(C_bb) @ c_yb / C[i, 0]) if C[i, 0] > 0 else 0.0
         if share < CONFOUNDED_R2:
             return []
         statement = (f"moving bed vs {name}: {share:.0%} of the {name}'s variance is shared with the bed velocity's "

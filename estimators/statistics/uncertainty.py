@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import null_space, orth
+from scipy.sparse.linalg import splu
 
 RANK_RTOL = 1e-10
 UNDETERMINED_SE = 1e2  # in units of the variable scales
@@ -34,6 +35,12 @@ class Uncertainty:
     null_directions_z: np.ndarray  # (k, n) unit directions the data do not fix
     unobservable: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+
+    columns: object = None  # (index) -> covariance of every unknown with ``index``, when cov_z is not formed
+
+    def cov_columns(self, index) -> np.ndarray:
+        """Covariance (n, len(index)) of every unknown with the unknowns ``index``."""
+        return self.columns(np.atleast_1d(index)) if self.columns is not None else self.cov_z[:, index]
 
     def determined_mask(self, Jd: np.ndarray) -> np.ndarray:
         """For each derived quantity (row of its Jacobian in z): does the data fix it?"""
@@ -92,7 +99,8 @@ def _in_words(v: np.ndarray, names: list, big: np.ndarray) -> str:
     return "a mix of " + ", ".join(word(i) for i in big[:3] if abs(v[i]) > 0.05)
 
 
-def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndarray, context: dict | None = None) -> Uncertainty:
+def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndarray, context: dict | None = None,
+                information: np.ndarray | None = None) -> Uncertainty:
     """Covariance of the scaled variables and the unobservable directions.
 
     Parameters
@@ -100,10 +108,13 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
     J : (m, n) Jacobian of the noise-weighted residuals w.r.t. the scaled variables z (dense or scipy sparse).
     A : (q, n) Jacobian of the equality constraints, or None.
     names : variable names; scale : (n,) variable scales (x = scale * z).
+    information : (n, n), optional
+        J^T J given instead of J (a Schur complement: :func:`uncertainty_eliminating`).
     """
-    n = J.shape[1]
+    n = information.shape[0] if information is not None else J.shape[1]
     Z = null_space(A) if A is not None and A.size else np.eye(n)
-    G = J.T @ J  # sparse for an assembled Jacobian: a survey's is block-sparse, never densified (m x n)
+    # sparse for an assembled Jacobian: a survey's is block-sparse, never densified (m x n)
+    G = information if information is not None else J.T @ J
     F = Z.T @ (G.toarray() if sp.issparse(G) else G) @ Z
     # Numerical rank on the Jacobi-equilibrated F (unit diagonal): one near-exact channel (a
     # noise-free heading, information ~1e14) must not push ordinary directions below a
@@ -149,3 +160,51 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
             warns.append(f"{len(items)} direction(s) of the unknowns {label}: " + "; ".join(items[:6])
                          + ("; ..." if len(items) > 6 else ""))
     return Uncertainty(cov_z, se, lam, null_z, unobs, warns)
+
+
+def uncertainty_eliminating(J, A: np.ndarray | None, names: list, scale: np.ndarray, local: np.ndarray,
+                            context: dict | None = None) -> Uncertainty:
+    """:func:`uncertainty` with the ``local`` unknowns (a velocity per ping: thousands, each touching
+    a few rows, no constraint) eliminated first: the rest's information is the Schur complement
+    F = G_SS - G_SV G_VV^-1 G_VS (G = J^T J, G_VV sparse and banded), so nothing of size
+    (unknowns x unknowns) is formed. The local unknowns' variances are diag(G_VV^-1) + diag(X C X^T)
+    (X = G_VV^-1 G_VS, C the rest's covariance), their covariance with the rest -X C
+    (:meth:`Uncertainty.cov_columns`); the rest's undetermined directions carry -X d into them."""
+    from .normal_equations import quadratic_diagonal, ridged
+
+    J = sp.csr_matrix(J) if not sp.issparse(J) else J.tocsr()
+    local = np.asarray(local, dtype=bool)
+    V, S = np.flatnonzero(local), np.flatnonzero(~local)
+    if A is not None and A.size and np.any(np.asarray(A)[:, V] != 0):
+        raise ValueError("local: the eliminated unknowns must not enter the constraints")
+    G = (J.T @ J).tocsc()
+    lu = splu(ridged(G[V][:, V]))
+    G_VS = G[V][:, S].toarray()
+    X = lu.solve(G_VS)
+    F = G[S][:, S].toarray() - G_VS.T @ X
+    red = uncertainty(None, None if A is None or not np.size(A) else np.asarray(A)[:, S], [names[i] for i in S],
+                      np.asarray(scale)[S], context, information=0.5 * (F + F.T))
+    n = len(names)
+    se = np.empty(n)
+    se[S] = red.se_z
+    var_V = quadratic_diagonal(lu, sp.identity(V.size, format="csr")) + np.einsum("ij,jk,ik->i", X, red.cov_z, X)
+    se[V] = np.sqrt(np.maximum(var_V, 0.0))
+    null = np.zeros((red.null_directions_z.shape[0], n))
+    if null.shape[0]:
+        null[:, S] = red.null_directions_z
+        null[:, V] = -red.null_directions_z @ X.T
+        null /= np.linalg.norm(null, axis=1, keepdims=True)
+        se[V[np.abs(null[:, V]).max(axis=0) > LEAK_RTOL]] = np.inf
+    at = np.full(n, -1)
+    at[S] = np.arange(S.size)
+
+    def columns(index):
+        pos = at[index]
+        if np.any(pos < 0):
+            raise ValueError("cov_columns: only the unknowns kept (not eliminated) have covariance columns here")
+        out = np.empty((n, pos.size))
+        out[S] = red.cov_z[:, pos]
+        out[V] = -X @ red.cov_z[:, pos]
+        return out
+
+    return Uncertainty(None, se, red.eigenvalues, null, red.unobservable, red.warnings, columns=columns)
