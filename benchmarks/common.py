@@ -16,6 +16,23 @@ import casadi as ca
 import numpy as np
 
 
+def real_dir() -> Path:
+    """The real instrument files: ``ADCPDYN_REAL_DATA``, default ../shared/data/real."""
+    return Path(os.environ.get("ADCPDYN_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real"))
+
+
+def real_cases(names, missing: list):
+    """(name, path, imported case) of each real file there; a missing one is appended to ``missing``."""
+    from .. import api
+
+    for name in names:
+        path = real_dir() / name
+        if not path.exists():
+            missing.append(str(path))
+            continue
+        yield name, path, api.import_file(path).case
+
+
 def machine() -> dict:
     """CPU count, platform and the versions that matter for the figures."""
     return {"python": platform.python_version(), "casadi": ca.__version__, "numpy": np.__version__,

@@ -16,7 +16,6 @@ Needs the ``compliance-checker`` package (the ``test`` extra).
 
 from __future__ import annotations
 
-import os
 import tempfile
 import time
 from pathlib import Path
@@ -24,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .common import Target, machine, print_targets, save_figure
+from .common import Target, machine, print_targets, real_dir, save_figure
 
 SUITES = ("cf:1.8", "acdd:1.3", "ioos:1.2")
 TARGET_PERCENT = 95.0
@@ -75,10 +74,6 @@ def checker_scores(path, suites=SUITES) -> dict:
     return out
 
 
-def _real_dir() -> Path:
-    return Path(os.environ.get("ADCPDYN_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real"))
-
-
 def _cases(folder: Path) -> tuple[list, list]:
     """(label, case file) of the exported cases, and the real files missing."""
     from .. import api
@@ -88,7 +83,7 @@ def _cases(folder: Path) -> tuple[list, list]:
         path = folder / f"{scenario}.h5"
         api.simulate(scenario, seed=1, out=path)
         out.append((label, path))
-    real = _real_dir() / REAL_FILE
+    real = real_dir() / REAL_FILE
     if real.is_file():
         path = folder / f"{real.stem}.h5"
         api.import_file(real, out=path)

@@ -18,14 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import Target, machine, print_targets, save_figure
+from .common import Target, machine, print_targets, real_cases, save_figure
 
 FILES = ("RiverPro_test01.PD0", "winriver01.PD0", "winriver02_transect.PD0")
 NAVIGATIONS = ("knots", "random_walk")
-
-
-def _real_dir() -> Path:
-    return Path(os.environ.get("ADCPDYN_REAL_DATA", Path(__file__).resolve().parents[2] / "shared" / "data" / "real"))
 
 
 def bench_diagnosis(quick: bool) -> dict:
@@ -36,12 +32,7 @@ def bench_diagnosis(quick: bool) -> dict:
 
     rows, missing = [], []
     sizes = {e: (spec[2][-1:] if quick else spec[2]) for e, spec in FIELD_ERRORS.items()}
-    for name in FILES[:1] if quick else FILES:
-        path = _real_dir() / name
-        if not path.exists():
-            missing.append(str(path))
-            continue
-        case = api.import_file(path).case
+    for name, path, case in real_cases(FILES[:1] if quick else FILES, missing):
         tic = time.perf_counter()
         calibration = api.calibrate(case, n_starts=8)
         calib_s = time.perf_counter() - tic

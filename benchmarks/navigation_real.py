@@ -17,8 +17,7 @@ import time
 
 import numpy as np
 
-from .common import Target, machine, print_targets, save_figure
-from .diagnosis_real import _real_dir
+from .common import Target, machine, print_targets, real_cases, real_dir, save_figure
 
 FILES = ("RiverPro_test01.PD0", "winriver01.PD0", "winriver02_transect.PD0")
 NAVIGATIONS = ("knots", "random_walk")
@@ -49,12 +48,7 @@ def bench_navigation(quick: bool) -> dict:
 
     starts = 4 if quick else 8
     files, windows, survey, missing = [], [], [], []
-    for name in FILES[:1] if quick else FILES:
-        path = _real_dir() / name
-        if not path.exists():
-            missing.append(str(path))
-            continue
-        case = api.import_file(path).case
+    for name, path, case in real_cases(FILES[:1] if quick else FILES, missing):
         for nav in NAVIGATIONS:
             files.append({"file": name, "pings": case.pings.n, "navigation": nav, **_row(*_calibrate([case], nav, starts))})
             print(f"{name:>26s} {nav:>11s}: misalignment {files[-1]['misalignment_deg']:+.3f} +- "
@@ -74,7 +68,7 @@ def bench_navigation(quick: bool) -> dict:
             print(f"{name:>26s} {nav:>11s}: windows {' '.join(f'{a:+.2f}+-{b:.2f}' for a, b in zip(m, s))}, "
                   f"chi2/dof {windows[-1]['chi2_per_dof']:.2f}", flush=True)
     name, cut = SURVEY
-    path = _real_dir() / name
+    path = real_dir() / name
     if not quick and path.exists():
         runs = [api.import_file(path, end_s=cut, name="w2a").case, api.import_file(path, start_s=cut, name="w2b").case]
         for nav in NAVIGATIONS:
