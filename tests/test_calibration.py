@@ -227,7 +227,7 @@ def test_random_walk_calibration_finds_the_installation_with_a_velocity_per_ping
     np.testing.assert_allclose(r.runs[0].velocity_knots_s, case.pings.time_s)
     auto = CalibrationProblem(case, CalibrationConfig(n_starts=1, timing="shallow", navigation="auto"))
     assert [run.navigation for run in auto.runs] == ["knots"]  # a motion model follows this run's attitude
-    with pytest.raises(ValueError, match="CalibrationConfig.jacobian: 'assembled' is for knot navigation"):
+    with pytest.raises(ValueError, match=r"CalibrationConfig.jacobian \(--jacobian\): 'assembled' is for knot navigation"):
         CalibrationProblem(case, CalibrationConfig(n_starts=1, attitude="samples", navigation="random_walk",
                                                    jacobian="assembled"))
     with pytest.raises(ValueError, match="CalibrationConfig.navigation: expected one of"):

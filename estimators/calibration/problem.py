@@ -293,8 +293,9 @@ class CalibrationProblem:
         self.runs = runs
         self.walk = any(r.random_walk for r in runs)
         if self.walk and config.jacobian == "assembled":
-            raise ValueError("CalibrationConfig.jacobian: 'assembled' is for knot navigation; a random-walk one (navigation "
-                             f"{config.navigation!r} on these runs) uses 'symbolic' or 'auto'")
+            raise ValueError("CalibrationConfig.jacobian (--jacobian): 'assembled' is for knot navigation, and navigation "
+                             f"{config.navigation!r} gives these runs a velocity per ping: use jacobian 'symbolic' or "
+                             "'auto', or navigation 'knots'")
         self.frame = self.cases[0].attitude.frame
         self.head_sensor = self.frame == "transducer"
         moving = any(r.moving_reference for r in runs)
