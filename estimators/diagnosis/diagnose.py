@@ -870,9 +870,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                      + "; ".join(f"{s.effect}: shrink {100 * s.shrink_fraction:.0f}%, delta BIC {s.delta_bic:.1f}"
                                  for s in chosen) + ")")
         if remaining:
+            after = _where(*current, cv[current_name], noise)  # where what is left lies, not where the base's gap did
             statement += (f"; a significant gap remains after {'it' if len(selected) == 1 else 'them'} (excess chi2 "
-                          f"{gap_after:.3f}, z = {z_after:.1f}), worst in {where[0]['channel']}: an effect outside the "
-                          "catalog, or more than the catalog's")
+                          f"{gap_after:.3f}, z = {z_after:.1f}), worst in {after[0]['channel']} ({after[0]['detail']}): "
+                          "an effect outside the catalog, or more than the catalog's"
+                          + _not_the_base(current[0]))
         v_after = _velocity_error(*current)
     else:
         gap_after, z_after, verdict = gap_before, z_before, "none"
@@ -880,7 +882,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         if remaining:
             statement = (f"no catalog effect is significant, but a significant gap remains (held-out excess chi2 "
                          f"{gap_before:.3f}, z = {z_before:.1f}), worst in {where[0]['channel']} "
-                         f"({where[0]['detail']}): an effect outside the catalog")
+                         f"({where[0]['detail']}): an effect outside the catalog"
+                         + _not_the_base(start_model))
         else:
             statement = f"no significant gap: the base model fits to the noise (held-out excess chi2 {gap_before:.3f})"
         v_after = v_before
@@ -1051,6 +1054,15 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
     name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
     fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
     return model, fit
+
+
+def _not_the_base(model: GapModel) -> str:
+    """What a remaining gap on a random-walk base is not: the boat's ping-to-ping motion (the
+    base's velocity per ping follows it) nor noise levels set by hand (they are the data's)."""
+    if not model.random_walk:
+        return ""
+    return ("; not the boat's ping-to-ping motion (the base gives it a velocity at every ping) nor noise levels "
+            "set by hand (each channel's is the data's own)")
 
 
 def _renamed(model: GapModel, overrides: dict) -> dict:
