@@ -22,31 +22,37 @@ FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
     "tilt_lowpass_s": ("tilt_lowpass", "s", (0.5, 1.5)),
     "heave_m_s": ("heave", "m/s", (0.05, 0.15)),
 }
-SHIFTED_PARAMETER = {  # error -> (the effect's unknown it moves, the sign of that move for a positive size)
-    "compass_offset_deg": ("A_rad", 1.0), "attitude_latency_s": ("delay_s", 1.0), "reference_latency_s": ("delay_s", 1.0),
-    "sound_speed_relative": ("relative_error", -1.0), "tilt_lowpass_s": ("tau_s", 1.0),
-}
 HEAVE_OMEGA_RAD_S = 1.0  # the injected heave's frequency (a 6.3-s swell)
-LIMIT_PARAMETERS = {  # error -> (the effect's unknowns whose detection limit bounds it, factor to the error's unit)
-    "compass_offset_deg": (("A_rad",), float(np.degrees(1.0))), "attitude_latency_s": (("delay_s",), 1.0),
-    "reference_latency_s": (("delay_s",), 1.0), "sound_speed_relative": (("relative_error",), 1.0),
-    # the bed is injected across the mean course, in an unknown mix of north and east: the harder of the two
-    "moving_bed_m_s": (("velocity_north_m_s", "velocity_east_m_s"), 1.0),
-    # heave and the tilt low-pass have none here: heave's depends on its frequency, and the low-pass's linearisation
-    # at tau = 0 moves the tilts only, while undoing the filter also moves their rates by tau y'' (noisy samples'
-    # second derivative); both get the limit of their forward signature instead (:mod:`.signal_limit`)
+ERROR_UNKNOWNS = {
+    # error -> (the unknowns of its catalog effect it moves, the change of each per unit of the error
+    # (None: set by the run's course), whether that effect's linearised detection limit bounds it)
+    "compass_offset_deg": (("A_rad",), (float(np.radians(1.0)),), True),
+    "attitude_latency_s": (("delay_s",), (1.0,), True),
+    "reference_latency_s": (("delay_s",), (1.0,), True),
+    "sound_speed_relative": (("relative_error",), (-1.0,), True),
+    # the low-pass's linearisation at tau = 0 moves the tilts only, while undoing the filter also moves
+    # their rates by tau y'' (noisy samples' second derivative): its limit is its forward signature's
+    "tilt_lowpass_s": (("tau_s",), (1.0,), False),
+    # the bed is injected across the mean course, in a mix of north and east the course sets
+    "moving_bed_m_s": (("velocity_north_m_s", "velocity_east_m_s"), None, True),
+    # heave has none: its limit depends on its frequency (:mod:`.signal_limit` gives its signature's)
 }
 
 
 def detection_limit(error: str, limits: dict) -> float | None:
     """The smallest size of ``error`` (its own unit) the diagnosis takes on a file, from its catalog
-    effect's per-unknown detection limits (full names -> value, :func:`.diagnose.detection_limits`);
-    None where they are missing."""
-    if error not in LIMIT_PARAMETERS:
+    effect's per-unknown detection limits (full names -> value, :func:`.diagnose.detection_limits`):
+    each unknown's limit over its change per unit of the error, the harder of them (a bed: the
+    harder of north and east); None where the effect's limit does not bound the error or is missing."""
+    names, per_unit, bounded = ERROR_UNKNOWNS.get(error, ((), None, False))
+    if not bounded:
         return None
-    names, factor = LIMIT_PARAMETERS[error]
-    found = [v for k, v in limits.items() if k.rsplit(".", 1)[-1] in names and np.isfinite(v)]
-    return float(max(found) * factor) if found else None
+    scale = dict(zip(names, per_unit or (1.0,) * len(names)))
+    found = [v / abs(scale[k.rsplit(".", 1)[-1]]) for k, v in limits.items()
+             if k.rsplit(".", 1)[-1] in scale and np.isfinite(v)]
+    return float(max(found)) if found else None
+
+
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 
 
@@ -54,13 +60,13 @@ def shift_signature(case: Case, error: str) -> dict:
     """How one unit of ``error`` (its unit) as :func:`inject` writes it moves its catalog effect's
     unknowns (unknown -> change per unit): a compass offset only the constant term A (a compass
     deviation's B and C stay), a bed across the mean course its north and east components."""
-    if error == "moving_bed_m_s":
-        course = _mean_course(case)
-        return {"velocity_north_m_s": float(np.cos(course - np.pi / 2)), "velocity_east_m_s": float(np.sin(course - np.pi / 2))}
-    if error not in SHIFTED_PARAMETER:
+    if error not in ERROR_UNKNOWNS:
         return {}
-    parameter, sign = SHIFTED_PARAMETER[error]
-    return {parameter: sign / LIMIT_PARAMETERS.get(error, ((), 1.0))[1]}
+    names, per_unit, _ = ERROR_UNKNOWNS[error]
+    if per_unit is None:  # the bed: across the run's mean course
+        course = _mean_course(case)
+        per_unit = (float(np.cos(course - np.pi / 2)), float(np.sin(course - np.pi / 2)))
+    return dict(zip(names, per_unit))
 
 
 def _mean_course(case: Case) -> float:
