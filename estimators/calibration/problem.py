@@ -41,7 +41,7 @@ from ..formulations import FORMULATIONS
 from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..measurement_model import (ANGLE_NAMES, NAVIGATIONS, ModelSpec, RunSetup, SurveyModel, choose_navigation,
                                  course_offset_rad, default_threads, heading_span, knot_times, ping_knots)
-from ..statistics.normal_equations import redundancy
+from ..statistics.normal_equations import group_levels, redundancy
 from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
 from .moving_bed_decision import mean_flow_speed, moving_bed_test
 from .result import CalibrationResult, RunResult
@@ -484,19 +484,14 @@ class CalibrationProblem:
         (Helmert / Foerstner variance components, the walk's intensity one of them: REML for a
         linear-Gaussian walk), since a velocity per ping takes up a share of each group that
         differs from group to group."""
-        e, raw = (np.asarray(a).ravel() for a in self.residual_fun(z, self.weights()))
+        raw = np.asarray(self.residual_fun(z, self.weights())[1]).ravel()
         if not self.walk:
             return self.model.reestimate_sigmas(raw, len(z), self.sigma)
         model = self.model
         J = self.jacobian_fun(z, self.weights()).sparse()
         used = model.mask > 0
         r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=model.velocity_columns())
-        out = dict(self.sigma)
-        for i, key in enumerate(model.sigma_keys):
-            m = (model.row_sigma == i) & used
-            if key[1] != "prior" and m.sum() > 3 and r[i] > 1.0:
-                out[key] = float(max(np.sqrt(np.sum(raw[m] ** 2) / r[i]), 1e-6))
-        return out
+        return group_levels(raw, model.row_sigma, used, model.sigma_keys, r, self.sigma)
 
     # ------------------------------------------------------------------ result
     def _result(self, ms: MultistartResult) -> CalibrationResult:

@@ -48,7 +48,8 @@ from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, c
                                  knot_times, ping_knots)
 from . import where as where_mod
 from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
-from ..statistics.normal_equations import as_sparse, inverse_columns, leave_out_predictions, marginal_covariance, redundancy
+from ..statistics.normal_equations import (as_sparse, group_levels, inverse_columns, leave_out_predictions,
+                                          marginal_covariance, redundancy)
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "vertical")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
@@ -504,12 +505,7 @@ def variance_components(model: GapModel, fit: Fit) -> dict:
     J, cols = free_jacobian(fit)
     used = model.mask > 0
     r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=velocity_columns(model, cols))
-    out = dict(fit.sigma)
-    for i, key in enumerate(model.sigma_keys):
-        m = (model.row_sigma == i) & used
-        if m.sum() > 3 and r[i] > 1.0:
-            out[key] = float(max(np.sqrt(np.sum(fit.raw[m] ** 2) / r[i]), 1e-6))
-    return out
+    return group_levels(fit.raw, model.row_sigma, used, model.sigma_keys, r, fit.sigma)
 
 
 # ---------------------------------------------------------------------------- which effects

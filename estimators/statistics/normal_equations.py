@@ -173,3 +173,16 @@ def redundancy(J, row_group: np.ndarray, used: np.ndarray, n_groups: int, local:
     r = np.zeros(n_groups)
     np.add.at(r, row_group[rows], 1.0 - np.clip(h, 0.0, 1.0))
     return r
+
+
+def group_levels(raw: np.ndarray, row_group: np.ndarray, used: np.ndarray, keys: list, r: np.ndarray,
+                 levels: dict, stated: tuple = ("prior",)) -> dict:
+    """``levels`` with each group's noise level re-estimated as its residuals over its redundancy
+    ``r`` (:func:`redundancy`): sqrt(e_g^T e_g / r_g), where the group has more than 3 rows and 1
+    degree of freedom; groups whose width is ``stated`` (a prior's), not estimated, keep theirs."""
+    out = dict(levels)
+    for i, key in enumerate(keys):
+        m = (row_group == i) & used
+        if key[1] not in stated and m.sum() > 3 and r[i] > 1.0:
+            out[key] = float(max(np.sqrt(np.sum(raw[m] ** 2) / r[i]), 1e-6))
+    return out
