@@ -202,7 +202,7 @@ def _casadi_error(err: Exception) -> str:
 
 def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: float = 1e-6,
                x_scale=None, progress: bool | None = None, workers: int = 1, make_solver=None,
-               warm_start: bool = False) -> MultistartResult:
+               warm_start: bool = False, build_s: float | None = None) -> MultistartResult:
     """Solve from every row of ``x0s``; return the best with per-start records.
 
     Parameters
@@ -228,15 +228,19 @@ def multistart(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, objective_rtol: 
     warm_start : bool
         Solve the first start alone, then give every other start its multipliers
         (``lam_x0``, ``lam_g0``); the solver must be built with IPOPT's warm start.
+    build_s : float, optional
+        Seconds ``solver`` took to build. Given, the first start is solved alone and the other
+        workers' solvers are built only if the time their starts save exceeds what building them
+        costs (a symbolic problem of a real run takes seconds to build and well under one to solve).
     """
     x0s = np.atleast_2d(np.asarray(x0s, dtype=float))
     done = run_starts(solver, x0s, lbx, ubx, lbg, ubg, p, progress=progress, workers=workers, make_solver=make_solver,
-                      warm_start=warm_start)
+                      warm_start=warm_start, build_s=build_s)
     return combine_starts(done, x0s.shape[1], objective_rtol, x_scale)
 
 
 def run_starts(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, progress: bool | None = None, workers: int = 1,
-               make_solver=None, warm_start: bool = False, indices=None) -> list:
+               make_solver=None, warm_start: bool = False, indices=None, build_s: float | None = None) -> list:
     """Solve from every row of ``x0s`` (the options of :func:`multistart`): per start its record
     (index, objective, iterations, time, status, success; ``indices`` names the rows, default
     0, 1, ...) and its solution (x, lam_g, g, lam_x), for :func:`combine_starts`. Starts solved
@@ -249,7 +253,6 @@ def run_starts(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, progress: bool |
         progress = progress_bar_enabled()
     n = x0s.shape[0]
     workers = max(1, min(int(workers), n)) if make_solver is not None else 1
-    solvers = [solver] + [make_solver() for _ in range(workers - 1)]
 
     warm: dict = {}
 
@@ -276,9 +279,13 @@ def run_starts(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, progress: bool |
 
     with silenced(getattr(solver, "quiet_stdout", False)):  # plugins that print whatever they are told
         first = []
-        if warm_start and n > 1:
+        if n > 1 and (warm_start or (build_s is not None and workers > 1)):
             first = [solve(0, solver)]
-            warm.update(lam_x0=first[0][1][3], lam_g0=first[0][1][1])
+            if warm_start:
+                warm.update(lam_x0=first[0][1][3], lam_g0=first[0][1][1])
+            if not worth_building(first[0][0]["time_s"], n - 1, workers, build_s):
+                workers = 1
+        solvers = [solver] + [make_solver() for _ in range(workers - 1)]
         todo = range(len(first), n)
         if workers == 1:
             done = first + [solve(i, solver) for i in _progress(todo, len(todo), progress)]
@@ -301,6 +308,14 @@ def run_starts(solver: ca.Function, x0s, lbx, ubx, lbg, ubg, p, progress: bool |
                 futures = [pool.submit(task, i) for i in todo]
                 done = first + [f.result() for f in _progress(as_completed(futures), len(todo), progress)]
     return done
+
+
+def worth_building(per_start_s: float, starts: int, workers: int, build_s: float | None) -> bool:
+    """Whether ``workers - 1`` more solvers, each costing ``build_s`` to build, save more on
+    ``starts`` starts of ``per_start_s`` each than they cost (always, when the cost is unknown)."""
+    if build_s is None or workers < 2:
+        return True
+    return starts * per_start_s * (1.0 - 1.0 / workers) > build_s * (workers - 1)
 
 
 def combine_starts(done: list, n_x: int, objective_rtol: float = 1e-6, x_scale=None) -> MultistartResult:

@@ -136,3 +136,31 @@ def test_sqpmethod_calibration_reaches_ipopts_optimum(pool_m0):
     ok = np.isfinite(se) & (se > 0)
     assert np.max(np.abs(sq.x - ip.x)[ok] / se[ok]) < 1e-2
     assert sq.max_constraint_violation < 1e-9
+
+
+def test_another_workers_solver_is_built_only_when_it_pays():
+    """With the solver's build time known, the first start is solved alone and a second worker's
+    solver is built only if the starts it takes save more than building it costs."""
+    import time as _time
+
+    from adcpdyn.solvers.multistart import run_starts, worth_building
+
+    class Fake:  # a solver that takes 10 ms a start
+        def __call__(self, x0, **kw):
+            _time.sleep(0.01)
+            return {"f": float(np.sum(x0**2)), "x": x0, "lam_g": np.zeros(0), "g": np.zeros(0), "lam_x": 0 * x0}
+
+        def stats(self):
+            return {"return_status": "Solve_Succeeded", "success": True, "iter_count": 1}
+
+    built = []
+    make = lambda: built.append(1) or Fake()
+    x0s = np.arange(16.0).reshape(8, 2)
+    args = (x0s, -np.inf, np.inf, np.zeros(0), np.zeros(0), np.zeros(0))
+    done = run_starts(Fake(), *args, progress=False, workers=2, make_solver=make, build_s=5.0)
+    assert built == [] and sorted(d[0]["index"] for d in done) == list(range(8))
+    run_starts(Fake(), *args, progress=False, workers=2, make_solver=make, build_s=1e-4)
+    assert built == [1]
+    run_starts(Fake(), *args, progress=False, workers=2, make_solver=make)  # cost unknown: built as before
+    assert built == [1, 1]
+    assert worth_building(1.0, 7, 2, 3.0) and not worth_building(0.5, 7, 2, 2.0) and worth_building(0.1, 1, 2, None)

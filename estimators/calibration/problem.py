@@ -24,6 +24,7 @@ are Newey-West sandwiches over time bins (:mod:`.hac`): residuals of real data a
 from __future__ import annotations
 
 import dataclasses
+import time
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -358,8 +359,10 @@ class CalibrationProblem:
                                                       ca.jacobian(st_z, z), g_z, ca.jacobian(g_z, z)])
         self.lbg, self.ubg = model.lbg, model.ubg
         self.sigma = model.initial_sigmas()
+        tic = time.perf_counter()
         self.solver = build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
                                    residual_fun=self.residual_fun)
+        self.build_s = time.perf_counter() - tic  # what another worker's solver costs (multistart weighs it)
 
     def _moving_bed_choice(self, moving: bool) -> str:
         choice = self.config.moving_bed
@@ -466,7 +469,7 @@ class CalibrationProblem:
             ms = distributed_multistart(self, x0s)
         else:
             ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
-                            make_solver=make, warm_start=cfg.solver.warm_start)
+                            make_solver=make, warm_start=cfg.solver.warm_start, build_s=self.build_s)
         if cfg.estimate_noise:
             refit = ms
             for _ in range(VCE_ITERATIONS if self.walk else 1):
