@@ -55,6 +55,18 @@ NED = ("north", "east", "down")
 ATTITUDE_SOURCES = ("model", "samples", "frozen")
 MOVING_BEDS = ("off", "constant", "section")
 NAVIGATIONS = ("knots", "random_walk")
+NAVIGATION_CHOICES = NAVIGATIONS + ("auto",)  # what a user may ask for: auto decides per run
+ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
+HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
+BED_SCALE_M_S = 0.05
+ROTATION_STEP_S = 0.05  # central-difference step of the reference point's rotational velocity (its slope)
+REFERENCE_MARGIN_KNOTS = 1.0  # reference samples kept up to this many knot intervals beyond the pings
+
+
+def has_moving_reference(case: Case) -> bool:
+    """Whether the run carries a moving reference velocity (GNSS, video: not a stationary one)."""
+    ref = case.reference
+    return ref is not None and not ref.stationary and ref.velocity_m_s is not None
 
 
 def choose_navigation(case: Case, attitude_source: str, requested: str = "auto") -> str:
@@ -63,18 +75,11 @@ def choose_navigation(case: Case, attitude_source: str, requested: str = "auto")
     sensor's samples (a real boat, which changes speed between two fixes: the bottom track sees it,
     a smooth curve does not), ``knots`` where a motion model follows the attitude (its course as
     smooth as the model) or the reference stays put."""
-    if requested not in NAVIGATIONS + ("auto",):
-        raise ValueError(f"navigation: expected one of {list(NAVIGATIONS + ('auto',))}, got {requested!r}")
+    if requested not in NAVIGATION_CHOICES:
+        raise ValueError(f"navigation: expected one of {list(NAVIGATION_CHOICES)}, got {requested!r}")
     if requested != "auto":
         return requested
-    ref = case.reference
-    moving = ref is not None and not ref.stationary and ref.velocity_m_s is not None
-    return "random_walk" if moving and attitude_source == "samples" else "knots"
-ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
-HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
-BED_SCALE_M_S = 0.05
-ROTATION_STEP_S = 0.05  # central-difference step of the reference point's rotational velocity (its slope)
-REFERENCE_MARGIN_KNOTS = 1.0  # reference samples kept up to this many knot intervals beyond the pings
+    return "random_walk" if has_moving_reference(case) and attitude_source == "samples" else "knots"
 
 
 def channel_slices(channels: list[tuple[str, int]]) -> dict:

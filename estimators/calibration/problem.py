@@ -40,7 +40,7 @@ from ...solvers.multistart import MultistartResult, SolverOptions, build_solver,
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..formulations import FORMULATIONS
 from ..statistics.hac import at_least_white, ping_bins, sandwich
-from ..measurement_model import (ANGLE_NAMES, NAVIGATIONS, ModelSpec, RunSetup, SurveyModel, choose_navigation,
+from ..measurement_model import (ANGLE_NAMES, NAVIGATION_CHOICES, ModelSpec, RunSetup, SurveyModel, choose_navigation,
                                  course_offset_rad, default_threads, heading_span, knot_times, ping_knots)
 from ..statistics.normal_equations import group_levels, redundancy
 from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
@@ -197,7 +197,7 @@ class CalibrationConfig:
         for name, allowed in (("formulation", FORMULATIONS), ("timing", TIMINGS), ("method", METHODS),
                               ("tangential", TANGENTIALS), ("attitude", ATTITUDES), ("jacobian", JACOBIANS),
                               ("moving_bed", MOVING_BED_CHOICES), ("compass_deviation", DEVIATION_CHOICES),
-                              ("standard_errors", SE_METHODS), ("navigation", NAVIGATIONS + ("auto",))):
+                              ("standard_errors", SE_METHODS), ("navigation", NAVIGATION_CHOICES)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"CalibrationConfig.{name}: expected one of {list(allowed)}, got {getattr(self, name)!r}")
         if not 0 < float(self.compass_deviation_prior_rad) <= 0.5:

@@ -43,9 +43,8 @@ from ..attitude_fit import fit_attitude
 from ..calibration.problem import ATTITUDES, choose_attitude
 from ..calibration.record import CalibrationRecord
 from ..statistics.hac import andrews_lags, at_least_white, newey_west, ping_bins, sandwich
-from ..measurement_model import (NAVIGATIONS, EffectTerm, ModelSpec, RunSetup, choose_navigation, course_offset_rad,
-                                 heading_centre,
-                                 knot_times, ping_knots)
+from ..measurement_model import (NAVIGATION_CHOICES, EffectTerm, ModelSpec, RunSetup, choose_navigation,
+                                 course_offset_rad, heading_centre, knot_times, ping_knots)
 from . import where as where_mod
 from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
 from ..statistics.normal_equations import (as_sparse, group_levels, inverse_columns, leave_out_predictions,
@@ -119,8 +118,8 @@ class DiagnosisConfig:
             raise ValueError(f"cv_folds: expected an integer >= 2, got {self.cv_folds}")
         if not self.cv_block_s > 0:
             raise ValueError(f"cv_block_s: expected a positive duration in s, got {self.cv_block_s}")
-        if self.navigation not in NAVIGATIONS + ("auto",):
-            raise ValueError(f"navigation: expected one of {list(NAVIGATIONS + ('auto',))}, got {self.navigation!r}")
+        if self.navigation not in NAVIGATION_CHOICES:
+            raise ValueError(f"navigation: expected one of {list(NAVIGATION_CHOICES)}, got {self.navigation!r}")
         if self.max_effects < 1:
             raise ValueError(f"max_effects: expected an integer >= 1, got {self.max_effects}")
         if not np.isfinite(self.heldout_z_walk):

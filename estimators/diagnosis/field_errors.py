@@ -12,6 +12,7 @@ import dataclasses
 import numpy as np
 
 from ...cases.case import Case
+from ..measurement_model import has_moving_reference
 
 FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
     "compass_offset_deg": ("compass_offset", "deg", (2.0, 4.0)),
@@ -120,12 +121,6 @@ def inject(case: Case, error: str, size: float) -> Case:
     course = _mean_course(case)
     u = size * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0])
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
-
-
-def has_moving_reference(case: Case) -> bool:
-    """Whether the run carries a moving reference velocity (what :data:`NEEDS_REFERENCE` write into)."""
-    ref = case.reference
-    return ref is not None and not ref.stationary and ref.velocity_m_s is not None
 
 
 def lowpass(t: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:

@@ -15,7 +15,8 @@ from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
 from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, diagnose
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, has_moving_reference, inject, shift_signature
+from ..measurement_model import has_moving_reference
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject, shift_signature
 from .signal_limit import signal_limit
 
 
