@@ -13,6 +13,10 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
+
+from ..estimators.calibration.record import CalibrationRecord
+
 STEPS = ("import", "calibrate", "compare", "correct", "diagnose")
 
 
@@ -26,37 +30,29 @@ def _times(out: Path) -> dict:
     return found
 
 
-def _deg(x) -> float:
-    return math.degrees(x) if x is not None else math.nan
-
-
-def _pm(value, se, digits=2, scale=1.0) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
+def _pm(value, se, digits=2) -> str:
+    if value is None or not math.isfinite(value):
         return "-"
-    se_text = "n.d." if se is None or not math.isfinite(se) else f"{se * scale:.{digits}f}"
-    return f"{value * scale:+.{digits}f} +- {se_text}"
+    se_text = "n.d." if se is None or not math.isfinite(se) else f"{se:.{digits}f}"
+    return f"{value:+.{digits}f} +- {se_text}"
 
 
-def _calibration(c: dict) -> list:
-    m = c.get("heading_misalignment_rad")
-    mis = "no reference" if m is None else _pm(_deg(m), _deg(c.get("heading_misalignment_se_rad")))
-    if m is not None and c.get("magnetic_declination_rad") is not None:
-        mis += f" [{_deg(c['magnetic_declination_rad']):+.2f}; {_deg(c.get('compass_error_rad')):+.2f}]"
-    test = c.get("moving_bed_test") or {}
-    bed = c.get("moving_bed_velocity_m_s")
-    bed_se = c.get("moving_bed_velocity_se_m_s") or [None, None]
-    model = c.get("moving_bed")
-    model = model.get("model", "-") if isinstance(model, dict) else (model or "-")
-    bed_text = f"{test['decision']} ({test.get('percent_of_flow', math.nan):.1f} % of the flow)" if test else model
-    if bed:
-        bed_text += "; " + ", ".join(_pm(v, s, 3) for v, s in zip(bed, bed_se))
-    dev, dev_se = c.get("compass_deviation_rad"), c.get("compass_deviation_se_rad") or {}
-    if isinstance(dev, dict):  # CALIB.json: {"sin": B, "cos": C, ...}
-        dev, dev_se = [dev["sin"], dev["cos"]], [dev_se.get("sin"), dev_se.get("cos")]
-    dev_text = "-" if not dev else ", ".join(_pm(_deg(v), _deg(s) if s is not None else None, 1) for v, s in zip(dev, dev_se))
-    head = c.get("radius_vectors_head_m")
-    head_se = c.get("radius_vectors_head_se_m")
-    if head is None or head_se is None or all(s is None or not math.isfinite(s) for s in head_se[0]):
+def _calibration(c: CalibrationRecord) -> list:
+    """Misalignment, bed, deviation and lever-arm cells of one calibration (the typed record; the
+    moving-bed test, which the record does not type, from its validated file)."""
+    deg = math.degrees
+    m = c.heading_misalignment_rad
+    mis = "no reference" if m is None else _pm(deg(m), deg(c.heading_misalignment_se_rad))
+    if m is not None and c.magnetic_declination_rad is not None:
+        mis += f" [{deg(c.magnetic_declination_rad):+.2f}; {deg(c.compass_error_rad):+.2f}]"
+    test = c.data.get("moving_bed_test") or {}
+    bed_text = f"{test['decision']} ({test.get('percent_of_flow', math.nan):.1f} % of the flow)" if test else c.moving_bed
+    if c.moving_bed_velocity_m_s is not None:
+        bed_text += "; " + ", ".join(_pm(v, s, 3) for v, s in zip(c.moving_bed_velocity_m_s, c.moving_bed_velocity_se_m_s))
+    dev, dev_se = c.compass_deviation_rad, c.compass_deviation_se_rad or (None, None)
+    dev_text = "-" if not dev else ", ".join(_pm(deg(v), None if s is None else deg(s), 1) for v, s in zip(dev, dev_se))
+    head, head_se = c.radius_vectors_head_m, c.radius_vectors_head_se_m
+    if head is None or head_se is None or not np.isfinite(head_se[0]).any():
         lever = "not determined"
     else:
         lever = ", ".join(f"{a} {_pm(v, s, 3)}" for a, v, s in zip("xyz", head[0], head_se[0]))
@@ -89,9 +85,8 @@ def table(out) -> str:
         calib = folder / "calib.json"
         status = {s: times.get((name, s), (None, math.nan)) for s in STEPS}
         if calib.exists():
-            c = json.loads(calib.read_text())
-            solver = c.get("solver") or {}
-            row.append(f"{solver.get('status', '?')}, {status['calibrate'][1]:.1f}")
+            c = CalibrationRecord.from_json(calib)
+            row.append(f"{(c.data.get('solver') or {}).get('status', '?')}, {status['calibrate'][1]:.1f}")
             row += _calibration(c)
         else:
             row += [f"exit {status['calibrate'][0]}"] + ["-"] * 4
@@ -108,9 +103,9 @@ def table(out) -> str:
         lines.append("| " + " | ".join(row) + " |")
     offsets = []
     for folder in sorted(p for p in out.iterdir() if p.is_dir() and (p / "calib.json").exists()):
-        run = json.loads((folder / "calib.json").read_text())["runs"][0]
-        if run.get("transducer_depth_offset_m") is not None:
-            offsets.append(f"{folder.name} {_pm(run['transducer_depth_offset_m'], run.get('transducer_depth_offset_se_m'), 3)} m")
+        run = CalibrationRecord.from_json(folder / "calib.json").runs[0]
+        if run.transducer_depth_offset_m is not None:
+            offsets.append(f"{folder.name} {_pm(run.transducer_depth_offset_m, run.transducer_depth_offset_se_m, 3)} m")
     if offsets:
         lines += ["", "The transducer-depth offset the slant ranges give (`runs[].transducer_depth_offset_m`): "
                   + "; ".join(offsets) + "."]

@@ -86,7 +86,7 @@ def test_readme_measured_table_reads_the_committed_runs():
 
 def test_real_table_reads_what_real_data_sh_wrote(tmp_path):
     """benchmarks/real_table.py on a folder laid out as real_data.sh writes it: the summary's times,
-    CALIB.json's misalignment (deg, with declination and compass error), bed test, deviation and
+    CALIB.json's (read into the typed record) misalignment (deg, with declination and compass error), bed test, deviation and
     lever arms, compare's errors, diagnose's verdict; a refused diagnose quoted by its one line."""
     import math
 
@@ -104,7 +104,8 @@ def test_real_table_reads_what_real_data_sh_wrote(tmp_path):
         "moving_bed_velocity_se_m_s": [0.027, 0.013], "compass_deviation_rad": {"sin": rad(0.2), "cos": rad(-0.3)},
         "compass_deviation_se_rad": {"sin": rad(1.0), "cos": rad(1.1)}, "radius_vectors_head_m": [[0.1, 0.2, 0.3]] * 4,
         "radius_vectors_head_se_m": [[0.01, 0.02, None]] * 4,
-        "runs": [{"transducer_depth_offset_m": 0.003, "transducer_depth_offset_se_m": 0.011}]}))
+        "attitude_frame": "transducer",
+        "runs": [{"case": "A", "transducer_depth_offset_m": 0.003, "transducer_depth_offset_se_m": 0.011}]}))
     (a / "cmp" / "A_compare.json").write_text(json.dumps({"asc": {"vector_error_rms_m_s": 0.211, "direction_error_rms_deg": 17.3},
                                                           "not_run": {"adc": "lever arms null"}}))
     (a / "diag.json").write_text(json.dumps({"verdict": "none", "gap_before": 0.147, "gap_z_before": 5.1,

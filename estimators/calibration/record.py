@@ -84,6 +84,7 @@ class RunRecord:
     transducer_depth_offset_m: float | None
     noise_sigma: dict
     chi2_per_channel: dict
+    transducer_depth_offset_se_m: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,6 +218,7 @@ class CalibrationRecord:
             attitude_source=r.get("attitude_source"),
             attitude_model=_attitude(r.get("attitude_model")),
             transducer_depth_offset_m=_float_or_none(r.get("transducer_depth_offset_m")),
+            transducer_depth_offset_se_m=_float_or_none(r.get("transducer_depth_offset_se_m")),
             noise_sigma=dict(r.get("noise_sigma") or {}), chi2_per_channel=dict(r.get("chi2_per_channel") or {}),
         ) for r in c.get("runs") or [])
         solver = c.get("solver") or {}
