@@ -11,6 +11,7 @@ quantities that depend on them get an infinite standard error instead of a numbe
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,7 +37,7 @@ class Uncertainty:
     unobservable: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
 
-    columns: object = None  # (index) -> covariance of every unknown with ``index``, when cov_z is not formed
+    columns: Callable | None = None  # (index) -> covariance of every unknown with ``index``, when cov_z is not formed
 
     def cov_columns(self, index) -> np.ndarray:
         """Covariance (n, len(index)) of every unknown with the unknowns ``index``."""
@@ -177,9 +178,10 @@ def uncertainty_eliminating(J, A: np.ndarray | None, names: list, scale: np.ndar
     V, S = np.flatnonzero(local), np.flatnonzero(~local)
     if A is not None and A.size and np.any(np.asarray(A)[:, V] != 0):
         raise ValueError("local: the eliminated unknowns must not enter the constraints")
-    G = (J.T @ J).tocsc()
-    lu = splu(ridged(G[V][:, V]))
-    G_VS = G[V][:, S].toarray()
+    G = (J.T @ J).tocsr()
+    G_V = G[V]  # the velocities' rows, sliced once
+    lu = splu(ridged(G_V[:, V]))
+    G_VS = G_V[:, S].toarray()
     X = lu.solve(G_VS)
     F = G[S][:, S].toarray() - G_VS.T @ X
     red = uncertainty(None, None if A is None or not np.size(A) else np.asarray(A)[:, S], [names[i] for i in S],
