@@ -361,9 +361,6 @@ def _calibration_config(args, formulation=None, one=True):
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
                          f"{args.moving_bed} (drop it, or use --moving-bed section)")
-    if args.jacobian == "assembled" and args.navigation == "random_walk":
-        raise ValueError("--jacobian assembled: assembles knot navigation only, not --navigation random_walk (use "
-                         "--jacobian auto or symbolic)")
     from .solvers.multistart import SolverOptions
 
     declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
