@@ -100,6 +100,23 @@ def cmd_scenarios(args) -> int:
     return 0
 
 
+def cmd_cache(args) -> int:
+    from .solvers import compiled
+
+    folder = compiled.cache_dir()
+    if args.clear:
+        print(f"{folder}: removed {compiled.clear()} compiled model(s)")
+        return 0
+    found = compiled.entries()
+    size_mb = sum(p.stat().st_size for p in found) / 1e6
+    cc = compiled.compiler() or "none found (models are evaluated interpreted)"
+    print(f"cache of compiled per-ping models: {folder} (set ${compiled.CACHE_ENV} to move it)")
+    print(f"C compiler: {cc}; {len(found)} model(s), {size_mb:.2f} MB")
+    for p in found[:args.list]:
+        print(f"  {p.name}  {p.stat().st_size / 1e3:.0f} kB")
+    return 0
+
+
 def cmd_simulate(args) -> int:
     from .cases.io import write_case
     from .cases.scenario import get_scenario
@@ -371,7 +388,8 @@ def _calibration_config(args, formulation=None, one=True):
         placement["workers"] = args.workers
     return CalibrationConfig(**placement, formulation=formulation or args.formulation, n_starts=args.starts, seed=args.seed,
                              method=args.method, timing=args.timing, tangential=args.tangential,
-                             jacobian=args.jacobian, attitude=args.attitude, moving_bed=args.moving_bed,
+                             jacobian=args.jacobian, compile=args.compile, attitude=args.attitude,
+                             moving_bed=args.moving_bed,
                              navigation=args.navigation, moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
                              standard_errors=args.standard_errors, magnetic_declination_rad=declination,
                              solver=SolverOptions(method=args.solver))
@@ -736,6 +754,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     command("scenarios", "list the built-in scenarios", cmd_scenarios)
 
+    s = command("cache", "where the compiled per-ping models are kept, how many, and how to empty it", cmd_cache)
+    s.add_argument("--clear", action="store_true", help="delete them (they are built again when needed)")
+    s.add_argument("--list", type=_seed, default=10, metavar="N", help="name the N newest")
+
     s = command("simulate", "simulate a scenario into a case file (a survey's transects with --runs)", cmd_simulate)
     s.add_argument("scenario", help="a built-in scenario (`adcpdyn scenarios`)")
     s.add_argument("--seed", type=_seed, default=0, help="noise seed")
@@ -813,6 +835,10 @@ def build_parser() -> argparse.ArgumentParser:
                             "samples, for runs no motion model follows) or auto")
         s.add_argument("--jacobian", default="auto", choices=["auto", "symbolic", "assembled"],
                        help="symbolic (whole problem differentiated by CasADi) or assembled (per row, long runs)")
+        s.add_argument("--compile", default="auto", choices=["auto", "always", "never"],
+                       help="the assembled problem's per-ping model as machine code from the per-machine cache "
+                            "(`adcpdyn cache`; built by the C compiler the first time, same numbers): auto for runs of "
+                            "20000 pings or more, always (with --jacobian assembled) or never")
         s.add_argument("--navigation", default="knots", choices=["knots", "random_walk", "auto"],
                        help="the vessel's velocity: knots (piecewise-linear), random_walk (a velocity at every ping, "
                             "its random-walk intensity and the noise levels from the data) or auto (random_walk for "

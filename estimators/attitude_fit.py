@@ -22,6 +22,7 @@ from scipy.signal import lombscargle
 
 from ..cases.case import Case
 from ..models.motion import AttitudeParams, mode_cs
+from ..solvers.ping_map import PingFunction
 
 BIC_MARGIN = 10.0
 DECAY_GRID_1_S = (0.0, 0.03, 0.1, 0.3, 1.0)
@@ -54,9 +55,9 @@ class AttitudeFit:
         return float(self.sigmas[0])
 
 
-def _series_function(n_modes: int, n_axes: int, n_samples: int, t_ref: float) -> ca.Function:
-    """(t (1, M), q) -> (stacked model (A M,), Jacobian) with q = [omega_k, decay_k]*, then per
-    axis [bias, C_k, S_k]*; per-sample SX mapped over the samples."""
+def _series_function(n_modes: int, n_axes: int, t_ref: float):
+    """(t (M,), q) -> (stacked model (A M,), Jacobian (A M, nq)) with q = [omega_k, decay_k]*, then
+    per axis [bias, C_k, S_k]*; one per-sample SX Function evaluated over the samples at once."""
     t = ca.SX.sym("t")
     q = ca.SX.sym("q", 2 * n_modes + n_axes * (1 + 2 * n_modes))
     ys = []
@@ -67,12 +68,13 @@ def _series_function(n_modes: int, n_axes: int, n_samples: int, t_ref: float) ->
             y = y + mode_cs(t, q[base + 1 + 2 * k], q[base + 2 + 2 * k], q[2 * k], q[2 * k + 1], t_ref)
         ys.append(y)
     y = ca.vertcat(*ys)
-    one = ca.Function("series1", [t, q], [y, ca.jacobian(y, q)])
-    tt = ca.MX.sym("t", 1, n_samples)
-    qq = ca.MX.sym("q", q.shape[0])
-    yy, jj = one.map(n_samples)(tt, qq)  # (A, M) and (A, nq M)
-    J = ca.vertcat(*[ca.reshape(jj[a, :], q.shape[0], n_samples).T for a in range(n_axes)])
-    return ca.Function("series", [tt, qq], [ca.vec(yy.T), J])
+    one = PingFunction(ca.Function("series1", [t, q], [y, ca.vec(ca.jacobian(y, q).T)]))  # per sample: y (A,), J^T
+
+    def series(times, qq):
+        yy, jj = one(np.asarray(times, dtype=float).reshape(-1, 1), np.asarray(qq, dtype=float))  # (M, A), (M, nq A)
+        M = yy.shape[0]
+        return yy.T.reshape(-1), jj.reshape(M, n_axes, -1).transpose(1, 0, 2).reshape(n_axes * M, -1)
+    return series
 
 
 def autocorrelation(x, lags: int) -> np.ndarray:
@@ -177,14 +179,14 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
                 best = (r, trial, c)
         _, trial, c = best
         q0 = np.concatenate([trial.reshape(-1)] + [c[:, a] for a in range(A)])
-        fun = _series_function(k, A, M, t_ref)
+        fun = _series_function(k, A, t_ref)
         lower = np.concatenate([np.tile([lo, 0.0], k), np.full(A * (1 + 2 * k), -np.inf)])
         upper = np.concatenate([np.tile([hi, MAX_DECAY_1_S], k), np.full(A * (1 + 2 * k), np.inf)])
         w = np.repeat(1.0 / scale, M)
         sol = least_squares(
-            lambda qq: w * (np.asarray(fun(t[None, :], qq)[0]).ravel() - Y.T.reshape(-1)),
+            lambda qq: w * (fun(t, qq)[0] - Y.T.reshape(-1)),
             np.clip(q0, lower, upper),
-            jac=lambda qq: w[:, None] * np.asarray(fun(t[None, :], qq)[1]),
+            jac=lambda qq: w[:, None] * fun(t, qq)[1],
             bounds=(lower, upper),
             x_scale="jac",
         )

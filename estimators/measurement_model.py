@@ -43,6 +43,7 @@ from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE, Attit
                              with_extra_mode)
 from ..models.rotations import course_difference_rad, euler_matrix, unskew
 from ..models.sensors import compass_correction, reference_point_velocity
+from ..solvers.compiled import compiled
 from .asc import asc
 from .attitude_fit import AttitudeFit, sampled_attitude
 from .formulations import AXES, lever_block
@@ -532,10 +533,12 @@ class SurveyModel:
     reported), ``heading`` (h), ``bed`` (bed parameters (n, 2)), ``assembled_nodes``.
     """
 
-    def __init__(self, runs: list[RunSetup], spec: ModelSpec, effects=(), peaks: dict | None = None):
+    def __init__(self, runs: list[RunSetup], spec: ModelSpec, effects=(), peaks: dict | None = None,
+                 compile_min_pings: int | None = None):
         if not runs:
             raise ValueError("runs: expected at least one run")
         self.runs, self.spec = runs, spec
+        self.compile_min_pings = compile_min_pings
         first = runs[0].case
         self.frame = first.attitude.frame
         self.head_sensor = self.frame == "transducer"
@@ -722,6 +725,8 @@ class SurveyModel:
             N = pings.n
             att, att_c = self.attitude_sensor[k], self.attitude_true[k]
             terms, ctx = self.terms_of(k), self.contexts[k]
+            long_run = self.compile_min_pings is not None and N >= self.compile_min_pings
+            fast = (lambda f: compiled(f, reverse=True)) if long_run else (lambda f: f)  # the gradient's sweep compiled too
             if run.attitude_source == "model":  # the sensor's own readings of the motion model (and its faults)
                 a = case.attitude
                 M = a.time_s.size
@@ -729,8 +734,8 @@ class SurveyModel:
                 p_full, p_tilt = self.attitude_params[k], self.attitude_params[k]
                 for e, th in terms:
                     t_att, p_tilt = e.attitude_time(t_att, th), e.tilt_attitude_params(p_tilt, self.attitude_layouts[k], th)
-                ypr_model = att.map(M)(t_att, p_full)[0]
-                tilt_model = att.map(M)(t_att, p_tilt)[0] if p_tilt is not p_full else ypr_model
+                ypr_model = fast(att).map(M)(t_att, p_full)[0]
+                tilt_model = fast(att).map(M)(t_att, p_tilt)[0] if p_tilt is not p_full else ypr_model
                 psi = ca.transpose(ypr_model[0, :])
                 for e, th in terms:
                     psi = e.heading_reading(psi, th)
@@ -762,7 +767,7 @@ class SurveyModel:
                 extra_bed = ca.repmat(sum(beds[1:], beds[0]).T, N, 1)
                 bed = extra_bed if bed is None else bed + extra_bed
             v_bt = v_ping - bed if bed is not None else v_ping
-            radial, rng = bt_fun.map(N)(ca.DM(pings.time_s).T, ca.DM(depth).T, g_rows, case.instrument.sound_speed_m_s,
+            radial, rng = fast(bt_fun).map(N)(ca.DM(pings.time_s).T, ca.DM(depth).T, g_rows, case.instrument.sound_speed_m_s,
                                         v_bt.T, self._p_rows(k, pings.time_s), self.r, ypr_beams, beams)
             radial, rng = radial * radial_scale, rng * range_scale
             n_nodes += bt_fun.n_instructions() * N
@@ -783,7 +788,7 @@ class SurveyModel:
                 p_ref = ca.DM(self.reference_point_sensor(case))
                 shifts = any(getattr(e, "shifts_reference", False) for e, _ in terms)
                 if run.reference_window_s is None:  # instantaneous samples
-                    dLam = att_c.map(L)(ca.DM(t_nav).T, self._p_rows(k, t_nav))[2]
+                    dLam = fast(att_c).map(L)(ca.DM(t_nav).T, self._p_rows(k, t_nav))[2]
                     v_model = ca.mtimes(hat_basis_dm(t_nav, run.knots), V)
                     if shifts:  # d/dt of the antenna's velocity
                         rot = [REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), att_c.map(L)(ca.DM(t_nav + dt).T,
@@ -803,7 +808,7 @@ class SurveyModel:
                                                + ca.transpose(rot))
                 for e, th in terms:
                     v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
-                v_ref = REFERENCE_VELOCITY.map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
+                v_ref = fast(REFERENCE_VELOCITY).map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
                 covered = run.covered(t_ref)
                 for j in range(3):
                     models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
@@ -1006,7 +1011,8 @@ class SurveyModel:
             offset += 2
         if offset != self.raw.shape[0]:
             raise RuntimeError(f"assembled Jacobian: {offset} rows, residuals have {self.raw.shape[0]}")
-        return RowJacobian(z, shared_z, blocks, self.raw.shape[0], None, u.scale, threads=threads)
+        return RowJacobian(z, shared_z, blocks, self.raw.shape[0], None, u.scale, threads=threads,
+                           compile_min_rows=self.compile_min_pings)
 
     # ------------------------------------------------------------------ starting values
     def initial_x(self, params: list, angles, centre, heading_guess: float = 0.0) -> np.ndarray:

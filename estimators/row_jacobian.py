@@ -20,6 +20,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from ..solvers.compiled import compiled
+
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 
@@ -67,10 +69,13 @@ class RowJacobian:
     the knot velocities (for blocks that do not name their own) and ``knot_scale`` the
     scale of z (x = scale z). ``threads``: each block's rows are split into this many
     contiguous chunks evaluated at once (CasADi releases Python's lock while it evaluates).
+    Blocks of at least ``compile_min_rows`` rows evaluate their per-row Jacobian compiled
+    (:mod:`~adcpdyn.solvers.compiled`, cached per machine); None: never.
     """
 
     def __init__(self, z: ca.MX, shared: ca.MX, blocks: list[RowBlock], n_rows: int,
-                 knot_columns: np.ndarray | None = None, knot_scale: np.ndarray | None = None, threads: int = 1):
+                 knot_columns: np.ndarray | None = None, knot_scale: np.ndarray | None = None, threads: int = 1,
+                 compile_min_rows: int | None = None):
         self.n_rows, self.n_z = n_rows, z.shape[0]
         self.n_p = n_rows  # the NLP's parameters are the residual weights, one per row
         self._shared = ca.Function("shared", [z], [shared, ca.jacobian(shared, z)])
@@ -87,8 +92,11 @@ class RowJacobian:
         for b in blocks:
             d, v, s = (ca.SX.sym(n, b.fun.sparsity_in(i)) for i, n in enumerate(("d", "v", "s")))
             y = b.fun(d, v, s)
-            f = ca.Function("row_jacobian", [d, v, s], [ca.densify(ca.jacobian(y, v)), ca.densify(ca.jacobian(y, s))])
+            # transposed: per row the k outputs' gradients one after another, so (n, k, ns) in numpy
+            f = ca.Function("row_jacobian", [d, v, s], [ca.densify(ca.jacobian(y, v)).T, ca.densify(ca.jacobian(y, s)).T])
             n = b.data.shape[1]
+            if compile_min_rows is not None and n >= compile_min_rows:
+                f = compiled(f)
             edges = np.linspace(0, n, max(1, min(threads, n)) + 1).astype(int)
             chunks = list(zip(edges[:-1], edges[1:]))
             maps = {m: f.map("row_jacobians", "serial", m, [2], []) for m in {hi - lo for lo, hi in chunks}}  # s shared
@@ -100,14 +108,14 @@ class RowJacobian:
         self.sparsity = self._pattern()
 
     def _evaluate(self, i: int, v: np.ndarray, s: np.ndarray):
-        """Per-row Jacobians of block i, (n, 3, k) and (n, ns, k), through a zero-copy FunctionBuffer."""
+        """Per-row Jacobians of block i, (n, k, 3) and (n, k, ns), through a zero-copy FunctionBuffer."""
         buffers = getattr(self._local, "buffers", None)
         if buffers is None:
             buffers = self._local.buffers = [None] * len(self._jac)
         if buffers[i] is None:
             b = self.blocks[i]
             k, n, ns = b.fun.size1_out(0), b.data.shape[1], self._jac[i][0].size1_in(2)
-            out = (np.empty((n, 3, k)), np.empty((n, ns, k)))
+            out = (np.empty((n, k, 3)), np.empty((n, k, ns)))
             parts = []
             for f, (lo, hi) in zip(self._jac[i], self._chunks[i]):
                 buf, run = f.buffer()
@@ -165,10 +173,13 @@ class RowJacobian:
             r = b.offset + np.arange(k * n)
             wr = w[r]
             ds_b = ds_dz[self._index[index]][:, sc].toarray()  # (ns_b, len(sc))
-            shared = ((js.transpose(2, 0, 1) * sign[:, None, None]) @ ds_b).reshape(k * n, -1) * wr[:, None]
+            shared = np.empty((k * n, sc.size))
+            for i in range(k):  # js[:, i] is a strided (n, ns) matrix BLAS takes as it is
+                np.matmul(js[:, i], ds_b * sign[i], out=shared[i * n:(i + 1) * n])
+            shared *= wr[:, None]
             knot_part = None
             if knotted:
-                jv = jv.transpose(2, 0, 1) * sign[:, None, None]  # (k, n, 3)
+                jv = jv.transpose(1, 0, 2) * sign[:, None, None]  # (k, n, 3)
                 H = b.velocity_basis.tocoo()
                 rows, cols, vals = [], [], []
                 for i in range(k):

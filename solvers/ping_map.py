@@ -5,19 +5,19 @@ shared by every ping. The pings are cut into equal blocks of at most ``CHUNK``; 
 map over a block (built once per block size, the shared column repeated for it) is evaluated
 through CasADi's buffer interface straight from and into numpy arrays: the DM round trip of
 an ordinary call costs more than the evaluation itself for the small per-ping models here.
-When the run is long enough to repay the compiler, the Function is compiled to machine code
-once per process (CasADi ``jit`` with the system C compiler, its files in the temporary folder).
+When the run is long enough to repay the compiler, the Function is evaluated as machine code
+from the per-machine cache (:mod:`.compiled`: compiled once, then loaded by every process).
 """
 
 from __future__ import annotations
 
 import functools
-import shutil
-import tempfile
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
+from .compiled import available, compiled
 
 CHUNK = 16384  # pings per mapped evaluation at most
 MAX_MAPS = 64  # block sizes whose maps a PingFunction keeps
@@ -49,7 +49,7 @@ class MapOptions:
             raise ValueError(f"{type(self).__name__}.threads: expected >= 1, got {self.threads}")
 
     def compiled(self, n_pings: int) -> bool:
-        if self.compile == "never" or shutil.which("gcc") is None:
+        if self.compile == "never" or not available():
             return False
         return self.compile == "always" or n_pings >= self.compile_min_pings
 
@@ -71,10 +71,7 @@ class PingFunction:
 
     @functools.cached_property
     def _compiled(self) -> ca.Function:
-        opts = {"jit": True, "compiler": "shell", "jit_temp_suffix": True,
-                "jit_options": {"flags": ["-O2"], "verbose": False, "directory": tempfile.gettempdir() + "/"}}
-        f = self.fun
-        return ca.Function(f.name() + "_compiled", f.sx_in(), f.call(f.sx_in()), f.name_in(), f.name_out(), opts)
+        return compiled(self.fun)
 
     def _mapped(self, size: int, compiled: bool, threads: int) -> ca.Function:
         """A plain Map node over ``size`` pings, built at once (CasADi's map with an input shared by

@@ -61,6 +61,8 @@ DECLINATION_SPAN_RAD = np.radians(1.0)  # runs' declinations farther apart than 
 DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
 JACOBIANS = ("auto", "symbolic", "assembled")
 ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is assembled per row
+COMPILES = ("auto", "always", "never")
+COMPILE_MIN_PINGS = 20_000  # runs from which the per-ping model is compiled under --compile auto (always assembled there)
 MOVING_BED_CHOICES = ("auto", "off", "constant", "section")
 DEVIATION_CHOICES = ("auto", "on", "off")
 SE_METHODS = ("hac", "white")
@@ -162,6 +164,12 @@ class CalibrationConfig:
         problem expanded to SX and differentiated by CasADi), ``assembled`` (per-row
         Jacobians chained numerically, :mod:`.row_jacobian`; MX problem) or ``auto``
         (assembled above ``ASSEMBLED_MIN_NODES`` expanded nodes: long runs, deep water).
+    compile : str
+        The assembled problem's per-ping model (bottom track with its gradient, per-row
+        Jacobians) as machine code from the per-machine cache (:mod:`~adcpdyn.solvers.compiled`,
+        built by the system C compiler the first time; the same numbers as interpreted):
+        ``auto`` for runs of at least ``COMPILE_MIN_PINGS`` pings, ``always`` (needs
+        ``jacobian='assembled'``) or ``never``.
     solver : SolverOptions
     """
 
@@ -185,6 +193,7 @@ class CalibrationConfig:
     scheduler: str = SERIAL
     attitude: str = "auto"
     jacobian: str = "auto"
+    compile: str = "auto"
     moving_bed: str = "auto"
     moving_bed_section_knots: int = 3
     compass_deviation: str = "auto"
@@ -197,12 +206,16 @@ class CalibrationConfig:
         for name, allowed in (("formulation", FORMULATIONS), ("timing", TIMINGS), ("method", METHODS),
                               ("tangential", TANGENTIALS), ("attitude", ATTITUDES), ("jacobian", JACOBIANS),
                               ("moving_bed", MOVING_BED_CHOICES), ("compass_deviation", DEVIATION_CHOICES),
-                              ("standard_errors", SE_METHODS), ("navigation", NAVIGATION_CHOICES)):
+                              ("standard_errors", SE_METHODS), ("navigation", NAVIGATION_CHOICES),
+                              ("compile", COMPILES)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"CalibrationConfig.{name}: expected one of {list(allowed)}, got {getattr(self, name)!r}")
         if not 0 < float(self.compass_deviation_prior_rad) <= 0.5:
             raise ValueError(f"CalibrationConfig.compass_deviation_prior_rad: expected a width in (0, 0.5] rad, "
                              f"got {self.compass_deviation_prior_rad!r}")
+        if self.compile == "always" and self.jacobian != "assembled":
+            raise ValueError(f"CalibrationConfig.compile (--compile): 'always' compiles the assembled problem's per-ping "
+                             f"model; expected jacobian (--jacobian) 'assembled', got {self.jacobian!r}")
         if int(self.moving_bed_section_knots) < 2:
             raise ValueError(f"CalibrationConfig.moving_bed_section_knots: expected >= 2, got {self.moving_bed_section_knots}")
         if self.magnetic_declination_rad is not None and not abs(float(self.magnetic_declination_rad)) <= np.pi:
@@ -325,7 +338,9 @@ class CalibrationProblem:
                          yaw_centre_rad=self.yaw_guess, heading=heading, deviation_prior_rad=prior,
                          moving_bed=self.moving_bed,
                          bed_knots=config.moving_bed_section_knots)
-        self.model = model = SurveyModel(runs, spec)
+        compile_min = {"always": 0, "never": None}.get(config.compile, COMPILE_MIN_PINGS)
+        assembled_only = self.walk or config.jacobian == "symbolic"  # compiled models are not expanded to SX
+        self.model = model = SurveyModel(runs, spec, compile_min_pings=None if assembled_only else compile_min)
         u = model.unknowns
         self.names, self.scale, self.lbx, self.ubx = list(u.names), u.scale, u.lower, u.upper
         # single-run views (tests, benchmarks, the CLI print)

@@ -1,0 +1,103 @@
+"""CasADi Functions compiled to machine code once per machine, kept in a cache folder you can see.
+
+CasADi generates the C code of a Function (with its first-order reverse derivative when a
+solver's gradient goes through it); the code's hash, with the compiler command and CasADi's
+version, names a shared library in the cache folder. The system C compiler builds it there the
+first time (written under a temporary name, then renamed: parallel workers never see half a
+library) and ``casadi.external`` loads it from then on, so one compilation serves every case,
+process and worker that uses the same per-ping model. The folder is ``$ADCPDYN_CACHE``, else
+``$XDG_CACHE_HOME/adcpdyn/compiled``, else ``~/.cache/adcpdyn/compiled``; ``adcpdyn cache`` lists
+it and ``adcpdyn cache --clear`` empties it. Without a compiler, or when compiling fails, the
+Function is returned as it was (interpreted: the same numbers, slower) and the reason is kept.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import casadi as ca
+
+CACHE_ENV = "ADCPDYN_CACHE"
+FLAGS = ("-O2", "-fPIC", "-shared")
+SUFFIX = ".so"
+
+last_failure: str | None = None  # why the last compilation fell back to the interpreted Function
+
+
+def cache_dir() -> Path:
+    """The cache folder (not created here)."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "adcpdyn" / "compiled"
+
+
+def compiler() -> str | None:
+    """The C compiler (``$CC``, else gcc or cc on PATH), or None."""
+    for name in (os.environ.get("CC"), "gcc", "cc"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def available() -> bool:
+    return compiler() is not None
+
+
+def library_path(fun: ca.Function, reverse: bool = False) -> tuple[Path, str]:
+    """Where ``fun``'s library lives in the cache, and its C code."""
+    gen = ca.CodeGenerator(f"{fun.name()}.c", {"with_header": False})
+    gen.add(fun)
+    if reverse:
+        gen.add(fun.reverse(1))  # named adj1_<name>: casadi.external finds it for the gradient
+    code = gen.dump()
+    key = hashlib.sha256("\n".join([code, compiler() or "", *FLAGS, ca.__version__, platform.machine()]).encode())
+    return cache_dir() / f"{fun.name()}_{key.hexdigest()[:20]}{SUFFIX}", code
+
+
+def compiled(fun: ca.Function, reverse: bool = False) -> ca.Function:
+    """``fun`` as a compiled library from the cache (built there if missing), with its reverse
+    derivative when ``reverse``; ``fun`` itself when it cannot be compiled (:data:`last_failure`)."""
+    global last_failure
+    cc = compiler()
+    if cc is None:
+        last_failure = "no C compiler (gcc, cc or $CC) on PATH"
+        return fun
+    path, code = library_path(fun, reverse)
+    if not path.exists():
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryDirectory(dir=path.parent, prefix=".build-") as tmp:
+                source, lib = Path(tmp) / f"{fun.name()}.c", Path(tmp) / path.name
+                source.write_text(code)
+                done = subprocess.run([cc, *FLAGS, str(source), "-o", str(lib), "-lm"], capture_output=True, text=True)
+                if done.returncode != 0:
+                    last_failure = f"{cc} failed on {fun.name()}: {done.stderr.strip().splitlines()[-1:]}"
+                    return fun
+                os.replace(lib, path)  # atomic: another worker's identical library may land first
+        except OSError as err:
+            last_failure = f"cannot write the cache {path.parent}: {err}"
+            return fun
+    return ca.external(fun.name(), str(path))
+
+
+def entries() -> list[Path]:
+    """The cached libraries, newest first."""
+    folder = cache_dir()
+    if not folder.is_dir():
+        return []
+    return sorted(folder.glob(f"*{SUFFIX}"), key=lambda p: p.stat().st_mtime, reverse=True)
+
+
+def clear() -> int:
+    """Delete the cached libraries; returns how many."""
+    found = entries()
+    for p in found:
+        p.unlink(missing_ok=True)
+    return len(found)

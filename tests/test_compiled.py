@@ -1,0 +1,94 @@
+"""The per-machine cache of compiled per-ping models (solvers/compiled.py) and the calibration
+that uses it: the same numbers as interpreted, derivatives included, one compilation per model."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from adcpdyn.cases.scenario import get_scenario
+from adcpdyn.cases.simulation import simulate
+from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+from adcpdyn.solvers import compiled
+
+pytestmark = pytest.mark.skipif(not compiled.available(), reason="no C compiler")
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv(compiled.CACHE_ENV, str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def _model() -> ca.Function:
+    x, p = ca.SX.sym("x", 3), ca.SX.sym("p", 2)
+    return ca.Function("ping_model", [x, p], [ca.sin(x) * ca.exp(p[0]), ca.dot(x, x) * p[1]], ["x", "p"], ["y", "z"])
+
+
+def test_compiled_model_and_its_gradient_equal_the_interpreted_ones(cache):
+    f = _model()
+    g = compiled.compiled(f, reverse=True)
+    assert g.class_name() == "External" and g.name_in() == f.name_in() and g.name_out() == f.name_out()
+    x0, p0 = np.array([0.3, -1.2, 2.0]), np.array([0.1, -0.7])
+    for a, b in zip(f(x0, p0), g(x0, p0)):
+        assert np.max(np.abs(np.asarray(a) - np.asarray(b))) < 1e-15
+    X, P = ca.MX.sym("X", 3), ca.MX.sym("P", 2)
+    grads = []
+    for fun in (f, g):  # a solver's gradient: reverse mode through the model, over a map of pings
+        y, z = fun.map(4)(ca.repmat(X, 1, 4), ca.repmat(P, 1, 4))
+        grads.append(ca.Function("grad", [X, P], [ca.gradient(ca.sumsqr(y) + ca.sum2(z), ca.vertcat(X, P))])(x0, p0))
+    assert np.max(np.abs(np.asarray(grads[0]) - np.asarray(grads[1]))) < 1e-12
+
+
+def test_one_compilation_per_model_kept_in_the_named_folder(cache):
+    f = _model()
+    compiled.compiled(f)
+    (lib,) = compiled.entries()
+    assert lib.parent == cache and lib.name.startswith("ping_model_")
+    stamp = lib.stat().st_mtime_ns
+    compiled.compiled(_model())  # the same model built again: loaded, not compiled
+    assert compiled.entries() == [lib] and lib.stat().st_mtime_ns == stamp
+    compiled.compiled(f, reverse=True)  # another library: the model with its derivative
+    assert len(compiled.entries()) == 2
+    assert not list(cache.glob(".build-*"))  # no half-built library left behind
+    assert compiled.clear() == 2 and compiled.entries() == []
+
+
+def test_without_a_compiler_the_interpreted_model_is_returned(cache, monkeypatch):
+    monkeypatch.setattr(compiled, "compiler", lambda: None)
+    f = _model()
+    assert compiled.compiled(f) is f and "no C compiler" in compiled.last_failure
+    assert compiled.entries() == []
+
+
+def test_compile_always_needs_the_assembled_jacobian():
+    with pytest.raises(ValueError, match=r"CalibrationConfig.compile \(--compile\).*expected jacobian \(--jacobian\) "
+                                         r"'assembled', got 'auto'"):
+        CalibrationConfig(compile="always")
+
+
+@pytest.mark.parametrize("scenario, attitude", [("pool_m0", "model"), ("deep_ship", "model"), ("diag_boat", "samples")])
+def test_compiled_calibration_problem_equals_the_interpreted_one(cache, scenario, attitude):
+    """Residuals, assembled Jacobian, J^T J and the NLP's gradient (the solver's reverse sweep through
+    the compiled bottom-track, attitude and reference models) of the same problem, compiled and not."""
+    sc = get_scenario(scenario)
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=25.0)), seed=2)
+    problems = {c: CalibrationProblem(case, CalibrationConfig(n_starts=1, seed=1, jacobian="assembled", compile=c,
+                                                              attitude=attitude, workers=1))
+                for c in ("always", "never")}
+    assert compiled.entries(), "the compiled problem built no library"
+    z = problems["never"].start_points(2, 1)[1]
+    w = problems["never"].weights()
+    out = {}
+    for c, pr in problems.items():
+        x, p = pr.nlp["x"], pr.nlp["p"]
+        grad = ca.Function("grad", [x, p], [ca.gradient(pr.nlp["f"], x)])(z, w)
+        out[c] = (np.asarray(pr.residual_fun(z, w)[0]).ravel(), pr.jacobian_fun(z, w).toarray(),
+                  pr.jacobian_fun.gram(z, w), np.asarray(grad).ravel())
+    for a, b in zip(out["always"], out["never"]):
+        assert np.max(np.abs(a - b)) <= 1e-12 * max(np.max(np.abs(b)), 1.0)
+    e, J = out["never"][0], out["never"][1]
+    assert np.max(np.abs(out["always"][3] - J.T @ e)) <= 1e-9 * np.max(np.abs(J.T @ e))  # f = |e|^2 / 2
