@@ -18,12 +18,12 @@ demo: $(STAMP)
 	$(VENV)/bin/adcpdyn demo --out demo_out
 
 test: $(STAMP)
-	$(PY) -m pytest -n auto
+	$(PY) -m pytest -n auto --dist worksteal
 
 # the tests marked slow (minutes; not in `make test`): every diagnose variant of the fuzz harness, the real
 # transect's reference latency
 test-slow: $(STAMP)
-	$(PY) -m pytest -n auto -m slow
+	$(PY) -m pytest -n auto --dist worksteal -m slow
 
 bench: $(STAMP)
 	@for suite in correction calibration formulations solvers scale survey surveyday diagnosis compliance; do \
