@@ -538,7 +538,8 @@ class SurveyModel:
         if not runs:
             raise ValueError("runs: expected at least one run")
         self.runs, self.spec = runs, spec
-        self.compile_min_pings = compile_min_pings
+        # the per-ping models as machine code when the problem's pings (all runs') reach compile_min_pings
+        self.compiled = compile_min_pings is not None and sum(r.case.pings.n for r in runs) >= compile_min_pings
         first = runs[0].case
         self.frame = first.attitude.frame
         self.head_sensor = self.frame == "transducer"
@@ -725,8 +726,7 @@ class SurveyModel:
             N = pings.n
             att, att_c = self.attitude_sensor[k], self.attitude_true[k]
             terms, ctx = self.terms_of(k), self.contexts[k]
-            long_run = self.compile_min_pings is not None and N >= self.compile_min_pings
-            fast = (lambda f: compiled(f, reverse=True)) if long_run else (lambda f: f)  # the gradient's sweep compiled too
+            fast = (lambda f: compiled(f, reverse=True)) if self.compiled else (lambda f: f)  # the gradient's sweep too
             if run.attitude_source == "model":  # the sensor's own readings of the motion model (and its faults)
                 a = case.attitude
                 M = a.time_s.size
@@ -1012,7 +1012,7 @@ class SurveyModel:
         if offset != self.raw.shape[0]:
             raise RuntimeError(f"assembled Jacobian: {offset} rows, residuals have {self.raw.shape[0]}")
         return RowJacobian(z, shared_z, blocks, self.raw.shape[0], None, u.scale, threads=threads,
-                           compile_min_rows=self.compile_min_pings)
+                           compile=self.compiled)
 
     # ------------------------------------------------------------------ starting values
     def initial_x(self, params: list, angles, centre, heading_guess: float = 0.0) -> np.ndarray:

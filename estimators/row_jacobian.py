@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..solvers.compiled import compiled
+from ..solvers.ping_map import CHUNK
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
@@ -69,13 +70,13 @@ class RowJacobian:
     the knot velocities (for blocks that do not name their own) and ``knot_scale`` the
     scale of z (x = scale z). ``threads``: each block's rows are split into this many
     contiguous chunks evaluated at once (CasADi releases Python's lock while it evaluates).
-    Blocks of at least ``compile_min_rows`` rows evaluate their per-row Jacobian compiled
-    (:mod:`~adcpdyn.solvers.compiled`, cached per machine); None: never.
+    With ``compile`` the per-row Jacobians run as machine code (:mod:`~adcpdyn.solvers.compiled`,
+    cached per machine).
     """
 
     def __init__(self, z: ca.MX, shared: ca.MX, blocks: list[RowBlock], n_rows: int,
                  knot_columns: np.ndarray | None = None, knot_scale: np.ndarray | None = None, threads: int = 1,
-                 compile_min_rows: int | None = None):
+                 compile: bool = False):
         self.n_rows, self.n_z = n_rows, z.shape[0]
         self.n_p = n_rows  # the NLP's parameters are the residual weights, one per row
         self._shared = ca.Function("shared", [z], [shared, ca.jacobian(shared, z)])
@@ -95,9 +96,11 @@ class RowJacobian:
             # transposed: per row the k outputs' gradients one after another, so (n, k, ns) in numpy
             f = ca.Function("row_jacobian", [d, v, s], [ca.densify(ca.jacobian(y, v)).T, ca.densify(ca.jacobian(y, s)).T])
             n = b.data.shape[1]
-            if compile_min_rows is not None and n >= compile_min_rows:
+            if compile:
                 f = compiled(f)
-            edges = np.linspace(0, n, max(1, min(threads, n)) + 1).astype(int)
+            # at least one chunk per thread, none above CHUNK rows: at most two chunk sizes, whose maps
+            # cost their size to build (one map over 10^5 rows took 0.4 s)
+            edges = np.linspace(0, n, max(1, min(max(threads, -(-n // CHUNK)), n)) + 1).astype(int)
             chunks = list(zip(edges[:-1], edges[1:]))
             maps = {m: f.map("row_jacobians", "serial", m, [2], []) for m in {hi - lo for lo, hi in chunks}}  # s shared
             self._jac.append([maps[hi - lo] for lo, hi in chunks])
@@ -136,22 +139,63 @@ class RowJacobian:
             list(self._pool.map(lambda part: part[1](), parts))
         return out
 
+    def _knot_pattern(self, index: int) -> sp.csr_matrix | None:
+        """Block ``index``'s knot columns (k n, n_z) as a 0/1 pattern, None without knots."""
+        b, knots = self.blocks[index], self._knots[index]
+        if b.velocity_basis is None or knots is None:
+            return None
+        k, n = b.fun.size1_out(0), b.data.shape[1]
+        H = b.velocity_basis.tocoo()
+        rows = np.concatenate([i * n + H.row for i in range(k) for _ in range(3)])
+        cols = np.concatenate([knots[H.col, a] for _ in range(k) for a in range(3)])
+        P = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(k * n, self.n_z))
+        P.data[:] = 1.0
+        return P
+
     def _pattern(self) -> sp.csr_matrix:
         """Structural pattern of J (rows x z): each block's shared columns and its rows' knots."""
-        rows, cols = [], []
-        for b, sc, knots in zip(self.blocks, self._cols, self._knots):
-            k, n = b.fun.size1_out(0), b.data.shape[1]
-            r = b.offset + np.arange(k * n)
-            rows.append(np.repeat(r, sc.size))
-            cols.append(np.tile(sc, r.size))
-            if b.velocity_basis is not None and knots is not None:
-                H = b.velocity_basis.tocoo()
-                for i in range(k):
-                    for a in range(3):
-                        rows.append(b.offset + i * n + H.row)
-                        cols.append(knots[H.col, a])
-        rows, cols = np.concatenate(rows), np.concatenate(cols)
-        return sp.csr_matrix((np.ones(rows.size, dtype=bool), (rows, cols)), shape=(self.n_rows, self.n_z))
+        pieces = []
+        for index, (b, sc) in enumerate(zip(self.blocks, self._cols)):
+            m = b.fun.size1_out(0) * b.data.shape[1]
+            pieces.append((b.offset, np.ones((m, sc.size)), sc, self._knot_pattern(index)))
+        return self._stack(pieces) != 0
+
+    def gram_sparsity(self) -> sp.csr_matrix:
+        """Pattern of J^T J (n_z, n_z), from the blocks' structure (shared columns dense, knots
+        sparse) without multiplying J's pattern out."""
+        G = sp.csr_matrix((self.n_z, self.n_z))
+        for index, sc in enumerate(self._cols):
+            rows, cols = np.repeat(sc, sc.size), np.tile(sc, sc.size)
+            parts = [sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(self.n_z, self.n_z))]
+            P = self._knot_pattern(index)
+            if P is not None:
+                kc = np.unique(P.indices)
+                rows, cols = np.repeat(kc, sc.size), np.tile(sc, kc.size)
+                cross = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(self.n_z, self.n_z))
+                parts += [cross, cross.T.tocsr(), sp.csr_matrix(P.T @ P)]
+            for part in parts:
+                G = G + part
+        return G != 0
+
+    def _stack(self, pieces) -> sp.csr_matrix:
+        """J (n_rows, n_z) as CSR from (offset, shared part (m, len(c)), c, knot part or None) per
+        block, row blocks in order (int32 indices, no triplets: a tenth of the memory at 10^5 pings)."""
+        blocks = []
+        for offset, shared, sc, knot_part in pieces:
+            m = shared.shape[0]
+            block = sp.csr_matrix((shared.reshape(-1), np.tile(sc.astype(np.int32), m),
+                                   np.arange(m + 1, dtype=np.int64) * sc.size), shape=(m, self.n_z))
+            blocks.append((int(offset), block + knot_part if knot_part is not None else block))
+        blocks.sort(key=lambda p: p[0])
+        stacked, row = [], 0
+        for start, block in blocks:  # rows no block holds (none today) stay empty
+            if start > row:
+                stacked.append(sp.csr_matrix((start - row, self.n_z)))
+            stacked.append(block)
+            row = start + block.shape[0]
+        if row < self.n_rows:
+            stacked.append(sp.csr_matrix((self.n_rows - row, self.n_z)))
+        return sp.vstack(stacked, format="csr")
 
     def _parts(self, z, w):
         """Per block: its rows r (k n,), its shared columns c, the weighted shared-column part
@@ -193,25 +237,7 @@ class RowJacobian:
             yield r, sc, shared, knot_part
 
     def __call__(self, z, w) -> sp.csr_matrix:
-        """J as CSR, block by block (int32 indices, no triplets: a tenth of the memory at 10^5 pings)."""
-        pieces = []
-        for r, sc, shared, knot_part in self._parts(z, w):
-            m = r.size
-            block = sp.csr_matrix((shared.reshape(-1), np.tile(sc.astype(np.int32), m),
-                                   np.arange(m + 1, dtype=np.int64) * sc.size), shape=(m, self.n_z))
-            if knot_part is not None:
-                block = block + knot_part
-            pieces.append((int(r[0]), block))
-        pieces.sort(key=lambda p: p[0])
-        stacked, row = [], 0
-        for start, block in pieces:  # rows no block holds (none today) stay empty
-            if start > row:
-                stacked.append(sp.csr_matrix((start - row, self.n_z)))
-            stacked.append(block)
-            row = start + block.shape[0]
-        if row < self.n_rows:
-            stacked.append(sp.csr_matrix((self.n_rows - row, self.n_z)))
-        return sp.vstack(stacked, format="csr")
+        return self._stack([(r[0], shared, sc, knot_part) for r, sc, shared, knot_part in self._parts(z, w)])
 
     def gram(self, z, w) -> np.ndarray:
         """J^T J (n_z, n_z) dense, block by block, without forming J: the shared columns'

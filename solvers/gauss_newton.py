@@ -23,14 +23,18 @@ class GaussNewtonHessian(ca.Callback):
     def __init__(self, jacobian, n_g: int, name: str = "nlp_hess_l", upper: bool = True):
         """``jacobian``: a callable (x, p) -> scipy sparse J with attributes ``sparsity`` (its
         structural pattern, scipy) and ``n_z``, ``n_p``; if it has ``gram(x, p)`` (dense J^T J)
-        that is used instead of forming J."""
+        that is used instead of forming J, and ``gram_sparsity()`` J^T J's pattern."""
         ca.Callback.__init__(self)
         self._jac = jacobian
         self._n_g = n_g
         self._n_x, self._n_p = jacobian.n_z, jacobian.n_p
         self._upper = upper
-        P = jacobian.sparsity.astype(float)
-        H = (sp.triu(P.T @ P) if upper else sp.csr_matrix(P.T @ P)).tocoo()
+        if hasattr(jacobian, "gram_sparsity"):  # the Jacobian knows J^T J's pattern from its blocks
+            PtP = jacobian.gram_sparsity().astype(float)
+        else:
+            P = jacobian.sparsity.astype(float)
+            PtP = P.T @ P
+        H = (sp.triu(PtP) if upper else sp.csr_matrix(PtP)).tocoo()
         self._hess_sp = ca.Sparsity.triplet(self._n_x, self._n_x, H.row.tolist(), H.col.tolist())
         rows, cols = self._hess_sp.get_triplet()
         self._rows, self._cols = np.asarray(rows), np.asarray(cols)

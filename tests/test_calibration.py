@@ -363,7 +363,10 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     assert np.max(np.abs(assembled.toarray() - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
     gram = symbolic.T @ symbolic  # the Gauss-Newton Hessian's J^T J, formed block by block without J
     assert np.max(np.abs(problems["assembled"].jacobian_fun.gram(z, w) - gram)) < 1e-9 * np.max(np.abs(gram))
-    assert np.all((symbolic != 0) <= problems["assembled"].jacobian_fun.sparsity.toarray())
+    pattern = problems["assembled"].jacobian_fun.sparsity.astype(float)
+    assert np.all((symbolic != 0) <= pattern.toarray())
+    # J^T J's pattern from the blocks' structure is the product of J's pattern
+    assert np.array_equal(problems["assembled"].jacobian_fun.gram_sparsity().toarray(), (pattern.T @ pattern).toarray() != 0)
 
 
 def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():

@@ -92,3 +92,12 @@ def test_compiled_calibration_problem_equals_the_interpreted_one(cache, scenario
         assert np.max(np.abs(a - b)) <= 1e-12 * max(np.max(np.abs(b)), 1.0)
     e, J = out["never"][0], out["never"][1]
     assert np.max(np.abs(out["always"][3] - J.T @ e)) <= 1e-9 * np.max(np.abs(J.T @ e))  # f = |e|^2 / 2
+
+
+def test_calibrate_help_states_the_compile_threshold():
+    from adcpdyn.cli import build_parser
+    from adcpdyn.estimators.calibration.problem import COMPILE_MIN_PINGS
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices["calibrate"]
+    text = next(a.help for a in sub._actions if a.dest == "compile")
+    assert f"{COMPILE_MIN_PINGS} pings or more" in text
