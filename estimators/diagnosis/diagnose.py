@@ -1021,31 +1021,36 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
         d = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY))
         return settled(*at(d, values), d)
     step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
-    tried, marginal, x = {}, {}, values
+    tried, marginal, kept = {}, {}, {}  # each delay's fit and marginal; the model of the best delay only
+
+    def visit(d: float, x: dict) -> None:
+        model, fit = at(d, x)
+        tried[d], marginal[d] = fit, fit.log_likelihood(model)
+        if not kept or marginal[d] > marginal[next(iter(kept))]:  # one expanded problem held, not one per delay
+            kept.clear()
+            kept[d] = model
+
+    ll = marginal.__getitem__
+    x = values
     for d in np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist() + \
             (-np.arange(step, REFERENCE_DELAY_SPAN_S + 1e-9, step)).tolist():
-        tried[d] = at(d, x if d != -step else values)  # each side warm-started from its neighbour
-        x = dict(zip(tried[d][1].names, tried[d][1].x))
-
-    def ll(d: float) -> float:
-        if d not in marginal:
-            marginal[d] = tried[d][1].log_likelihood(tried[d][0])
-        return marginal[d]
+        visit(d, x if d != -step else values)  # each side warm-started from its neighbour
+        x = dict(zip(tried[d].names, tried[d].x))
     for h in (step / 2, step / 4):
         best = max(tried, key=ll)
         for d in (best - h, best + h):
             if abs(d) <= REFERENCE_DELAY_SPAN_S + 1e-9 and d not in tried:
-                tried[d] = at(d, dict(zip(tried[best][1].names, tried[best][1].x)))
+                visit(d, dict(zip(tried[best].names, tried[best].x)))
     best = max(tried, key=ll)
     near = sorted(d for d in tried if abs(d - best) <= 2 * step + 1e-9)  # two intervals: past the ping-scale ripple
     curvature, slope, _ = np.polyfit(np.array(near) - best, [ll(d) for d in near], 2) if len(near) >= 3 else (0.0, 0.0, 0.0)
     if curvature < 0:  # the parabola's vertex, within the last refinement's reach
         vertex = best + float(np.clip(-slope / (2 * curvature), -step / 4, step / 4))
         if vertex not in tried and abs(vertex) <= REFERENCE_DELAY_SPAN_S:
-            tried[vertex] = at(vertex, dict(zip(tried[best][1].names, tried[best][1].x)))
+            visit(vertex, dict(zip(tried[best].names, tried[best].x)))
             best = max(tried, key=ll)
     edge = best in (min(tried), max(tried))  # the profile may rise beyond the span
-    model, fit = settled(*tried[best], best)
+    model, fit = settled(kept[best], tried[best], best)
     name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
     fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
     return model, fit
