@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -1022,20 +1023,27 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
         return settled(*at(d, values), d)
     step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
     tried, marginal, kept = {}, {}, {}  # each delay's fit and marginal; the model of the best delay only
+    lock = threading.Lock()
 
     def visit(d: float, x: dict) -> None:
         model, fit = at(d, x)
-        tried[d], marginal[d] = fit, fit.log_likelihood(model)
-        if not kept or marginal[d] > marginal[next(iter(kept))]:  # one expanded problem held, not one per delay
-            kept.clear()
-            kept[d] = model
+        with lock:
+            tried[d], marginal[d] = fit, fit.log_likelihood(model)
+            if not kept or marginal[d] > marginal[next(iter(kept))]:  # one expanded problem held, not one per delay
+                kept.clear()
+                kept[d] = model
+
+    def side(delays: list) -> None:  # each side warm-started from its neighbour, the first from the given values
+        x = values
+        for d in delays:
+            visit(d, x)
+            x = dict(zip(tried[d].names, tried[d].x))
 
     ll = marginal.__getitem__
-    x = values
-    for d in np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist() + \
-            (-np.arange(step, REFERENCE_DELAY_SPAN_S + 1e-9, step)).tolist():
-        visit(d, x if d != -step else values)  # each side warm-started from its neighbour
-        x = dict(zip(tried[d].names, tried[d].x))
+    sides = (np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist(),
+             (-np.arange(step, REFERENCE_DELAY_SPAN_S + 1e-9, step)).tolist())
+    with ThreadPoolExecutor(max_workers=2) as pool:  # the two sides at once (CasADi lets go of Python's lock)
+        list(pool.map(side, sides))
     for h in (step / 2, step / 4):
         best = max(tried, key=ll)
         for d in (best - h, best + h):
@@ -1049,6 +1057,7 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
         if vertex not in tried and abs(vertex) <= REFERENCE_DELAY_SPAN_S:
             visit(vertex, dict(zip(tried[best].names, tried[best].x)))
             best = max(tried, key=ll)
+    best = best if best in kept else next(iter(kept))  # a tie: the delay whose model was kept
     edge = best in (min(tried), max(tried))  # the profile may rise beyond the span
     model, fit = settled(kept[best], tried[best], best)
     name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
