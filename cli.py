@@ -27,6 +27,7 @@ EXIT_STATUS = """exit status:
   2    bad input: an unreadable or invalid file, an impossible value or option; one line on
        stderr names the field (a batch: some case failed, the others are written)
   130  interrupted (Ctrl-C: 128 + SIGINT); no partial file is left
+  141  the output's reader stopped reading (a pipe into `head`: 128 + SIGPIPE); nothing said
   143  terminated (128 + SIGTERM); no partial file is left
 """
 
@@ -1023,6 +1024,10 @@ def main(argv=None) -> int:
     try:
         with _sigterm_as_exception(), held:
             code = args.func(args)
+    except BrokenPipeError:  # the reader stopped reading (`| head`): quiet, as a shell's SIGPIPE death
+        with contextlib.suppress(OSError, ValueError):  # nothing more to flush at exit
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        code = 128 + signal.SIGPIPE
     except (ValueError, OSError) as exc:
         # CaseFormatError is a ValueError; every user-facing error is one line.
         error, code = f"adcpdyn {args.command}: error: {_one_line(exc)}", 2

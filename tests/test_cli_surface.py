@@ -47,7 +47,7 @@ def test_help_lists_every_command_with_defaults_choices_and_exit_statuses(capsys
     assert set(helps) == set(action.choices) and len(helps) >= 12
     for name, text in helps.items():
         assert text and f"{name}" in top and text.split()[0] in top, name
-    for status in ("0 ", "1 ", "2 ", "130", "143"):
+    for status in ("0 ", "1 ", "2 ", "130", "141", "143"):
         assert f"  {status}" in top
     for name, sub in action.choices.items():
         assert main([name, "--help"]) == 0
@@ -213,3 +213,17 @@ def test_noise_levels_are_printed_with_their_units():
     line = noise_levels_line({"heading": float(np.radians(0.5)), "bt": 0.0637, "range": 0.396, "reference": None,
                               "motion": 0.19})
     assert line == "noise levels (one standard deviation): heading 0.5 deg, bt 0.0637 m/s, range 0.396 m, motion 0.19 m/s/sqrt(s)"
+
+
+def test_a_reader_that_stops_reading_ends_the_command_quietly():
+    """``adcpdyn scenarios | head -1``: the pipe closed before the output is written ends the
+    command with 128 + SIGPIPE and nothing on stderr (no 'Broken pipe' error, no traceback)."""
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "adcpdyn.cli", "scenarios"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # the reader is gone before the first line
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 128 + signal.SIGPIPE and err == ""
