@@ -139,8 +139,9 @@ class RowJacobian:
             list(self._pool.map(lambda part: part[1](), parts))
         return out
 
-    def _knot_pattern(self, index: int) -> sp.csr_matrix | None:
-        """Block ``index``'s knot columns (k n, n_z) as a 0/1 pattern, None without knots."""
+    def _knot_index(self, index: int):
+        """Block ``index``'s knot entries: (rows within the block, columns of z, the velocity basis
+        as COO), output by output and axis by axis; None without knots."""
         b, knots = self.blocks[index], self._knots[index]
         if b.velocity_basis is None or knots is None:
             return None
@@ -148,7 +149,16 @@ class RowJacobian:
         H = b.velocity_basis.tocoo()
         rows = np.concatenate([i * n + H.row for i in range(k) for _ in range(3)])
         cols = np.concatenate([knots[H.col, a] for _ in range(k) for a in range(3)])
-        P = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(k * n, self.n_z))
+        return rows, cols, H
+
+    def _knot_pattern(self, index: int) -> sp.csr_matrix | None:
+        """Block ``index``'s knot columns (k n, n_z) as a 0/1 pattern, None without knots."""
+        entries = self._knot_index(index)
+        if entries is None:
+            return None
+        rows, cols, _ = entries
+        b = self.blocks[index]
+        P = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(b.fun.size1_out(0) * b.data.shape[1], self.n_z))
         P.data[:] = 1.0
         return P
 
@@ -208,8 +218,8 @@ class RowJacobian:
             k, n = b.fun.size1_out(0), b.data.shape[1]
             sc, knot_columns = self._cols[index], self._knots[index]
             v = np.zeros((n, 3))  # (n, 3): CasADi's column-major (3, n)
-            knotted = b.velocity_basis is not None and knot_columns is not None
-            if knotted:
+            entries = self._knot_index(index)
+            if entries is not None:
                 knots = np.asarray(z, dtype=float).ravel()[knot_columns] * self.knot_scale[knot_columns]
                 v = b.velocity_basis @ knots
             jv, js = self._evaluate(index, v, s[self._index[index]])
@@ -222,18 +232,11 @@ class RowJacobian:
                 np.matmul(js[:, i], ds_b * sign[i], out=shared[i * n:(i + 1) * n])
             shared *= wr[:, None]
             knot_part = None
-            if knotted:
+            if entries is not None:
+                rows, cols, H = entries
                 jv = jv.transpose(1, 0, 2) * sign[:, None, None]  # (k, n, 3)
-                H = b.velocity_basis.tocoo()
-                rows, cols, vals = [], [], []
-                for i in range(k):
-                    for a in range(3):
-                        c = knot_columns[H.col, a]
-                        rows.append(i * n + H.row)
-                        cols.append(c)
-                        vals.append(jv[i, H.row, a] * H.data * self.knot_scale[c] * wr[i * n + H.row])
-                knot_part = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                                          shape=(k * n, self.n_z))
+                vals = np.concatenate([jv[i, H.row, a] * H.data for i in range(k) for a in range(3)])
+                knot_part = sp.csr_matrix((vals * self.knot_scale[cols] * wr[rows], (rows, cols)), shape=(k * n, self.n_z))
             yield r, sc, shared, knot_part
 
     def __call__(self, z, w) -> sp.csr_matrix:
