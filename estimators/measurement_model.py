@@ -734,8 +734,9 @@ class SurveyModel:
                 p_full, p_tilt = self.attitude_params[k], self.attitude_params[k]
                 for e, th in terms:
                     t_att, p_tilt = e.attitude_time(t_att, th), e.tilt_attitude_params(p_tilt, self.attitude_layouts[k], th)
-                ypr_model = fast(att).map(M)(t_att, p_full)[0]
-                tilt_model = fast(att).map(M)(t_att, p_tilt)[0] if p_tilt is not p_full else ypr_model
+                sensor = fast(att).map(M)
+                ypr_model = sensor(t_att, p_full)[0]
+                tilt_model = sensor(t_att, p_tilt)[0] if p_tilt is not p_full else ypr_model
                 psi = ca.transpose(ypr_model[0, :])
                 for e, th in terms:
                     psi = e.heading_reading(psi, th)

@@ -41,8 +41,9 @@ def cache_dir() -> Path:
 def compiler() -> str | None:
     """The C compiler (``$CC``, else gcc or cc on PATH), or None."""
     for name in (os.environ.get("CC"), "gcc", "cc"):
-        if name and shutil.which(name):
-            return shutil.which(name)
+        found = shutil.which(name) if name else None
+        if found:
+            return found
     return None
 
 

@@ -739,7 +739,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
 
     def refit(selected_terms, name, start_fit):
         terms = selected_terms + _terms(base, name)
-        values = dict(zip(start_fit.names, start_fit.x))
+        values = start_fit.values
         if base_model.random_walk and any(t.effect.name == "reference_latency" for t in terms):
             return _delay_profile(base, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
         model = GapModel(base, terms, peaks, solver=config.solver)
@@ -981,7 +981,7 @@ def _fixed_points(base, terms, peaks, config, model, fit, pinned):
         values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
         shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])
         model = GapModel(shifted, terms, peaks, solver=config.solver)
-        new = model.solve(model.start(dict(zip(fit.names, fit.x))), fit.sigma, fixed=pinned)
+        new = model.solve(model.start(fit.values), fit.sigma, fixed=pinned)
         moved = max(abs(float(new.x[model.names.index(n)]) - values[field]) for field, n in names.items())
         fit = new
         if moved < 1e-3:
@@ -1037,7 +1037,7 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
         x = values
         for d in delays:
             visit(d, x)
-            x = dict(zip(tried[d].names, tried[d].x))
+            x = tried[d].values
 
     ll = marginal.__getitem__
     sides = (np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist(),
@@ -1048,14 +1048,14 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
         best = max(tried, key=ll)
         for d in (best - h, best + h):
             if abs(d) <= REFERENCE_DELAY_SPAN_S + 1e-9 and d not in tried:
-                visit(d, dict(zip(tried[best].names, tried[best].x)))
+                visit(d, tried[best].values)
     best = max(tried, key=ll)
     near = sorted(d for d in tried if abs(d - best) <= 2 * step + 1e-9)  # two intervals: past the ping-scale ripple
     curvature, slope, _ = np.polyfit(np.array(near) - best, [ll(d) for d in near], 2) if len(near) >= 3 else (0.0, 0.0, 0.0)
     if curvature < 0:  # the parabola's vertex, within the last refinement's reach
         vertex = best + float(np.clip(-slope / (2 * curvature), -step / 4, step / 4))
         if vertex not in tried and abs(vertex) <= REFERENCE_DELAY_SPAN_S:
-            visit(vertex, dict(zip(tried[best].names, tried[best].x)))
+            visit(vertex, tried[best].values)
             best = max(tried, key=ll)
     best = best if best in kept else next(iter(kept))  # a tie: the delay whose model was kept
     edge = best in (min(tried), max(tried))  # the profile may rise beyond the span

@@ -99,6 +99,11 @@ class Fit:
     free: np.ndarray | None = None  # unknowns neither pinned nor held by an active bound
     profile_se: dict = field(default_factory=dict)  # SEs of unknowns pinned at a likelihood profile's maximum
 
+    @property
+    def values(self) -> dict:
+        """The estimates by unknown name (a warm start for another model: ``GapModel.start``)."""
+        return dict(zip(self.names, self.x))
+
     def group_rss(self, model: "GapModel") -> dict:
         out = {}
         for i, key in enumerate(model.sigma_keys):
