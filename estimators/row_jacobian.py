@@ -12,6 +12,7 @@ matrix as ``casadi.jacobian`` of the stacked residuals, in O(rows) time and memo
 
 from __future__ import annotations
 
+import functools
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -108,7 +109,11 @@ class RowJacobian:
         self._data = [np.ascontiguousarray(b.data.T) for b in blocks]  # (n, n_d): CasADi's column-major (n_d, n)
         self._pool = _pool(threads) if threads > 1 else None
         self._local = threading.local()  # evaluation buffers are per thread (multistart solves in threads)
-        self.sparsity = self._pattern()
+
+    @functools.cached_property
+    def sparsity(self) -> sp.csr_matrix:
+        """Structural pattern of J (rows x z), built on first use (J^T J's comes from :meth:`gram_sparsity`)."""
+        return self._pattern()
 
     def _evaluate(self, i: int, v: np.ndarray, s: np.ndarray):
         """Per-row Jacobians of block i, (n, k, 3) and (n, k, ns), through a zero-copy FunctionBuffer."""
@@ -189,27 +194,53 @@ class RowJacobian:
 
     def _stack(self, pieces) -> sp.csr_matrix:
         """J (n_rows, n_z) as CSR from (offset, shared part (m, len(c)), c, knot part or None) per
-        block, row blocks in order (int32 indices, no triplets: a tenth of the memory at 10^5 pings)."""
+        block: each block's entries written once into J's own data and column-index arrays, row
+        blocks in order (int32 indices, no triplets, no scipy stacking: a tenth of the memory at
+        10^5 pings). Rows no block holds (none today) stay empty."""
         blocks = []
         for offset, shared, sc, knot_part in pieces:
+            if knot_part is None:  # the same columns on every row: written below without a CSR of its own
+                blocks.append((int(offset), shared, sc))
+                continue
             m = shared.shape[0]
             block = sp.csr_matrix((shared.reshape(-1), np.tile(sc.astype(np.int32), m),
-                                   np.arange(m + 1, dtype=np.int64) * sc.size), shape=(m, self.n_z))
-            blocks.append((int(offset), block + knot_part if knot_part is not None else block))
+                                   np.arange(m + 1, dtype=np.int64) * sc.size), shape=(m, self.n_z)) + knot_part
+            blocks.append((int(offset), block, None))
         blocks.sort(key=lambda p: p[0])
-        stacked, row = [], 0
-        for start, block in blocks:  # rows no block holds (none today) stay empty
-            if start > row:
-                stacked.append(sp.csr_matrix((start - row, self.n_z)))
-            stacked.append(block)
+        counts = np.zeros(self.n_rows, dtype=np.int64)  # entries per row
+        row = 0
+        for start, block, sc in blocks:
+            if start < row or start + block.shape[0] > self.n_rows:
+                raise ValueError(f"RowJacobian: block rows {start}..{start + block.shape[0]} overlap another's or lie "
+                                 f"outside 0..{self.n_rows}")
             row = start + block.shape[0]
-        if row < self.n_rows:
-            stacked.append(sp.csr_matrix((self.n_rows - row, self.n_z)))
-        return sp.vstack(stacked, format="csr")
+            counts[start:row] = sc.size if sc is not None else np.diff(block.indptr)
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        index_type = np.int32 if indptr[-1] < np.iinfo(np.int32).max else np.int64
+        data, indices = np.empty(indptr[-1]), np.empty(indptr[-1], dtype=index_type)
+        for start, block, sc in blocks:
+            lo, hi = indptr[start], indptr[start + block.shape[0]]
+            if sc is not None:
+                data[lo:hi] = block.reshape(-1)
+                indices[lo:hi].reshape(block.shape)[...] = sc
+            else:
+                data[lo:hi], indices[lo:hi] = block.data, block.indices
+        return sp.csr_matrix((data, indices, indptr.astype(index_type)), shape=(self.n_rows, self.n_z))
+
+    def _scratch(self, index: int, shape: tuple) -> np.ndarray:
+        """Block ``index``'s shared-column part, one array per thread reused from call to call
+        (allocating 10^5 pings' afresh cost as much as filling it)."""
+        scratch = getattr(self._local, "scratch", None)
+        if scratch is None:
+            scratch = self._local.scratch = {}
+        if index not in scratch or scratch[index].shape != shape:
+            scratch[index] = np.empty(shape)
+        return scratch[index]
 
     def _parts(self, z, w):
         """Per block: its rows r (k n,), its shared columns c, the weighted shared-column part
-        (k n, len(c)) dense, and the weighted knot part (k n, n_z) sparse (None without knots)."""
+        (k n, len(c)) dense, and the weighted knot part (k n, n_z) sparse (None without knots).
+        The shared-column part is this thread's scratch array: valid until the next call."""
         w = np.asarray(w, dtype=float).ravel()
         s, ds_dz = self._shared(z)
         s = s.full().ravel()
@@ -227,7 +258,7 @@ class RowJacobian:
             r = b.offset + np.arange(k * n)
             wr = w[r]
             ds_b = ds_dz[self._index[index]][:, sc].toarray()  # (ns_b, len(sc))
-            shared = np.empty((k * n, sc.size))
+            shared = self._scratch(index, (k * n, sc.size))
             for i in range(k):  # js[:, i] is a strided (n, ns) matrix BLAS takes as it is
                 np.matmul(js[:, i], ds_b * sign[i], out=shared[i * n:(i + 1) * n])
             shared *= wr[:, None]
@@ -245,9 +276,31 @@ class RowJacobian:
     def gram(self, z, w) -> np.ndarray:
         """J^T J (n_z, n_z) dense, block by block, without forming J: the shared columns'
         part by a dense product, the knots' by sparse ones (knot and shared columns are disjoint)."""
+        return self.gram_and_gradient(z, w)[0]
+
+    def gram_and_gradient(self, z, w, e: np.ndarray | None = None) -> tuple:
+        """J^T J as :meth:`gram` and, with the residuals ``e`` (n_rows,), the gradient J^T e of
+        0.5 |e|^2 from the same pass over the blocks (None without ``e``)."""
+        return self._accumulate(self._parts(z, w), e)[:2]
+
+    def jacobian_and_gram(self, z, w) -> tuple[sp.csr_matrix, np.ndarray]:
+        """J as CSR and J^T J from one pass over the blocks (a sparse J^T J of 10^5 pings costs
+        more than the pass)."""
+        pieces = []
+        G, _ = self._accumulate(self._parts(z, w), None, pieces)
+        return self._stack([(r[0], shared, sc, knot_part) for r, sc, shared, knot_part in pieces]), G
+
+    def _accumulate(self, parts, e: np.ndarray | None, keep: list | None = None) -> tuple:
+        """(J^T J, J^T e or None) over ``parts`` (:meth:`_parts`); each part appended to ``keep`` if given."""
         G = np.zeros((self.n_z, self.n_z))
-        for _, sc, shared, knot_part in self._parts(z, w):
-            G[np.ix_(sc, sc)] += shared.T @ shared
+        grad = None if e is None else np.zeros(self.n_z)
+        for part in parts:
+            r, sc, shared, knot_part = part
+            if keep is not None:
+                keep.append(part)
+            G[np.ix_(sc, sc)] += shared.T @ shared  # numpy takes A.T @ A to BLAS syrk
+            if grad is not None:
+                grad[sc] += shared.T @ e[r[0]:r[-1] + 1]  # a block's rows are contiguous
             if knot_part is not None:  # on the block's own knot columns only: a survey's other runs' stay untouched
                 kc = np.unique(knot_part.indices)
                 kp = knot_part[:, kc]
@@ -255,4 +308,6 @@ class RowJacobian:
                 G[np.ix_(kc, sc)] += cross
                 G[np.ix_(sc, kc)] += cross.T
                 G[np.ix_(kc, kc)] += (kp.T @ kp).toarray()
-        return G
+                if grad is not None:
+                    grad[kc] += kp.T @ e[r[0]:r[-1] + 1]
+        return G, grad

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .gauss_newton import GaussNewtonHessian
+from .gauss_newton import AssembledLeastSquares, GaussNewtonHessian
 from .least_squares import LeastSquaresSolver
 from .nlp_methods import METHODS, SolverOptions, casadi_options
 
@@ -86,13 +86,18 @@ def expand_problem(nlp: dict, residuals: ca.MX, extra: dict | None = None):
     return sx_nlp, out["residuals"], {k: out[k] for k in extra}
 
 
-def _gauss_newton_hessian(nlp: dict, residuals, upper: bool):
+def _assembled(residuals) -> bool:
+    """An assembled Jacobian (scipy, e.g. :class:`~adcpdyn.estimators.row_jacobian.RowJacobian`), not CasADi's."""
+    return residuals is not None and hasattr(type(residuals), "sparsity") and \
+        not isinstance(residuals, (ca.Function, ca.SX, ca.MX))  # the type's: the pattern is built on first use
+
+
+def _gauss_newton_hessian(nlp: dict, residuals, upper: bool, oracle: AssembledLeastSquares | None = None):
     """sigma J^T J as the ``hess_lag`` Function (upper triangle for IPOPT, whole for the SQP methods)."""
     if residuals is None:
         raise ValueError("residuals: required for hessian='gauss-newton' (f must be 0.5 |residuals|^2)")
-    assembled = hasattr(residuals, "sparsity") and not isinstance(residuals, ca.Function)
-    if assembled:  # assembled per-row Jacobian (scipy): the callback
-        return GaussNewtonHessian(residuals, nlp["g"].shape[0], upper=upper)
+    if _assembled(residuals):  # assembled per-row Jacobian (scipy): the callback
+        return GaussNewtonHessian(residuals, nlp["g"].shape[0], upper=upper, oracle=oracle)
     x, p = nlp["x"], nlp.get("p", ca.MX.sym("p", 0))
     jac = residuals if isinstance(residuals, ca.Function) else \
         ca.Function("residual_jacobian", [x, p], [ca.jacobian(residuals, x)])
@@ -110,7 +115,7 @@ def resolved_hessian(options: SolverOptions, residuals=None) -> str:
     if options.hessian != "auto":
         return options.hessian
     rule = METHODS[options.method].auto
-    assembled = residuals is not None and hasattr(residuals, "sparsity") and not isinstance(residuals, ca.Function)
+    assembled = residuals is not None and hasattr(type(residuals), "sparsity") and not isinstance(residuals, ca.Function)
     if rule == "size":
         size = residuals.size1_out(0) * residuals.size2_out(0) if isinstance(residuals, ca.Function) else 0
         return "gauss-newton" if assembled or (residuals is not None and size > AUTO_GN_SIZE) else "exact"
@@ -152,8 +157,17 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
                                   tol=options.tol, max_iter=options.max_iter)
     hessian = resolved_hessian(options, residuals)
     opts = options.ipopt() if options.method == "ipopt" else casadi_options(options, hessian)
+    oracle = None
+    if _assembled(residuals) and residual_fun is not None and options.method == "ipopt" and isinstance(nlp["x"], ca.MX):
+        # f and its gradient from the assembled Jacobian: IPOPT never differentiates the residual graph
+        oracle = AssembledLeastSquares(residual_fun, residuals)
+        objective, gradient = oracle.functions(ca.Function("objective", [nlp["x"], nlp["p"]], [nlp["f"]]))
+        nlp = {**nlp, "f": objective(nlp["x"], nlp["p"])}
+        opts["grad_f"] = gradient
+        opts["calc_lam_p"] = False  # d(Lagrangian)/dp would differentiate the residual graph after all
+        like = None  # nothing of another solver's derivatives is needed
     if hessian == "gauss-newton":
-        opts["hess_lag"] = _gauss_newton_hessian(nlp, residuals, upper=options.method == "ipopt")
+        opts["hess_lag"] = _gauss_newton_hessian(nlp, residuals, upper=options.method == "ipopt", oracle=oracle)
     if like is not None and options.method == "ipopt":
         shared = [("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g")] + ([("hess_lag", "nlp_hess_l")] if hessian == "exact" else [])
         opts.update({opt: like.get_function(fn) for opt, fn in shared if like.has_function(fn)})
@@ -163,6 +177,8 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
     solver.quiet_stdout = quiet  # some plugins print whatever their options say: the driver drops it
     if "hess_lag" in opts and isinstance(opts["hess_lag"], GaussNewtonHessian):
         solver.gauss_newton_callback = opts["hess_lag"]  # the callback lives as long as its solver, no longer
+    if oracle is not None:
+        solver.least_squares_callbacks = (objective, gradient)  # likewise
     return solver
 
 

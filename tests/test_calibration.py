@@ -450,3 +450,33 @@ def test_gauss_newton_callback_lives_with_its_solver_not_forever():
     del problem, callback
     gc.collect()
     assert ref() is None
+
+
+def test_assembled_ipopt_oracle_matches_the_objective_graph():
+    """With an assembled Jacobian IPOPT takes f, its gradient J^T e and J^T J from callbacks that
+    share one pass over the per-row Jacobians: each equals the objective graph's value, reverse-mode
+    gradient and the assembled J's product, at a point and again after the weights change (the
+    caches are keyed on both); the objective's derivative in the weights comes from the graph."""
+    sc = get_scenario("deep_ship")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=3)
+    pr = CalibrationProblem(case, CalibrationConfig(n_starts=1, seed=1, jacobian="assembled", workers=1,
+                                                    solver=SolverOptions(hessian="gauss-newton")))
+    x, p = pr.nlp["x"], pr.nlp["p"]
+    graph = ca.Function("graph", [x, p], [pr.nlp["f"], ca.gradient(pr.nlp["f"], x), ca.gradient(pr.nlp["f"], p)])
+    grad_f, hess = pr.solver.get_function("nlp_grad_f"), pr.solver.get_function("nlp_hess_l")
+    objective = pr.solver.least_squares_callbacks[0]
+    z = pr.start_points(2, 1)[1]
+    lam_g = np.zeros(len(pr.lbg))
+    for w in (pr.weights(), pr.weights() * np.linspace(0.5, 2.0, pr.weights().size)):
+        f_ref, g_ref, gp_ref = (np.asarray(a).ravel() for a in graph(z, w))
+        f, g = (np.asarray(a).ravel() for a in grad_f(z, w))
+        assert abs(f[0] - f_ref[0]) <= 1e-12 * abs(f_ref[0])
+        assert np.max(np.abs(g - g_ref)) <= 1e-9 * np.max(np.abs(g_ref))
+        assert float(objective(z, w)) == pytest.approx(f_ref[0], rel=1e-12)
+        J = pr.jacobian_fun(z, w).toarray()
+        H = np.asarray(hess(z, w, 2.0, lam_g).full())
+        assert np.max(np.abs(H - 2.0 * np.triu(J.T @ J))) <= 1e-10 * np.max(np.abs(J.T @ J))
+        rev = objective.reverse(1)
+        adj_z, adj_w = (np.asarray(a).ravel() for a in rev(z, w, f_ref[0], 1.0))
+        assert np.max(np.abs(adj_z - g_ref)) <= 1e-9 * np.max(np.abs(g_ref))
+        assert np.max(np.abs(adj_w - gp_ref)) <= 1e-12 * np.max(np.abs(gp_ref))

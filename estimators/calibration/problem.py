@@ -68,6 +68,10 @@ MOVING_BED_CHOICES = ("auto", "off", "constant", "section")
 DEVIATION_CHOICES = ("auto", "on", "off")
 SE_METHODS = ("hac", "white")
 VCE_ITERATIONS = 3  # variance-component re-estimations of a random-walk calibration (each with a refit)
+# IPOPT's initial barrier for the refit after the noise levels, which starts at the solution: at 0.1 (a
+# cold start's) four of its seven iterations at 10^5 pings only walked the barrier down, the objective
+# unchanged to 1e-8; at 1e-3 it takes four, the same optimum to 1e-6 of the unknowns' scale
+REFIT_MU_INIT = 1e-3
 MIN_HEADING_SPAN = 0.1  # heading_span above which the one-cycle compass deviation is estimated (0.5: all round)
 CONFOUNDED_R2 = 0.9  # share of a yaw's variance explained by the bed's: the two are not told apart
 
@@ -489,15 +493,25 @@ class CalibrationProblem:
             ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
                             make_solver=make, warm_start=cfg.solver.warm_start, build_s=self.build_s)
         if cfg.estimate_noise:
-            refit = ms
+            refit, solver = ms, self._refit_solver()
             for _ in range(VCE_ITERATIONS if self.walk else 1):
                 self.sigma = self._noise_levels(refit.x)
-                refit = multistart(self.solver, refit.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)
+                refit = multistart(solver, refit.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)
             # the per-start table stays that of the multistart; the final solve is the refit
             ms = MultistartResult(**{**ms.__dict__, "x": refit.x, "objective": refit.objective, "success": refit.success,
                                      "status": refit.status, "iterations": refit.iterations, "lam_g": refit.lam_g,
                                      "g": refit.g, "message": ms.message + f"; noise re-estimated, refit: {refit.status}"})
         return self._result(ms)
+
+    def _refit_solver(self):
+        """The solver of the refit from the solution: IPOPT's barrier starting at ``REFIT_MU_INIT``
+        where another solver costs nothing to build (an assembled Jacobian's callbacks); the
+        problem's own elsewhere."""
+        options = self.solver_options
+        if not self.assembled or options.method != "ipopt" or options.warm_start or options.mu_init <= REFIT_MU_INIT:
+            return self.solver
+        return build_solver(self.nlp, dataclasses.replace(options, mu_init=REFIT_MU_INIT), "calibration_refit",
+                            residuals=self.jacobian_fun, residual_fun=self.residual_fun)
 
     def _noise_levels(self, z: np.ndarray) -> dict:
         """Each (run, group)'s noise level from the residuals at ``z``: on knots, the RMS with the
@@ -519,9 +533,14 @@ class CalibrationProblem:
         model, u, cfg = self.model, self.model.unknowns, self.config
         w = self.weights()
         e = np.asarray(self.residual_fun(ms.x, w)[0]).ravel()
-        J = self.jacobian_fun(ms.x, w)
-        # an assembled one stays sparse (rows x unknowns), and a random walk's (a velocity per ping)
-        J = J.tocsr() if self.assembled else J.sparse().tocsr() if self.walk else np.asarray(J)
+        # an assembled one stays sparse (rows x unknowns), its J^T J from the same pass; a random walk's
+        # (a velocity per ping) sparse too
+        information = None
+        if self.assembled:
+            J, information = self.jacobian_fun.jacobian_and_gram(ms.x, w)
+        else:
+            J = self.jacobian_fun(ms.x, w)
+            J = J.sparse().tocsr() if self.walk else np.asarray(J)
         r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))
@@ -530,7 +549,7 @@ class CalibrationProblem:
             unc = uncertainty_eliminating(J, Jg[eq] if eq.any() else None, self.names, self.scale,
                                           model.velocity_columns(), context)
         else:
-            unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale, context)
+            unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale, context, information=information)
         x = ms.x * self.scale
         # Standard errors of the shared unknowns Q: Newey-West sandwich, never below white noise's.
         Q = np.concatenate([u.index(k) for k in ("heading", "installation", "lever", "moving_bed")])

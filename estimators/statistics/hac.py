@@ -87,20 +87,22 @@ def sandwich(J, e: np.ndarray, P_q: np.ndarray, row_run: np.ndarray, row_time: n
     """
     e = np.asarray(e, dtype=float).ravel()
     JP = np.asarray(J @ P_q)
-    influence = JP * e[:, None]  # (m, q): each row's pull on the unknowns Q
     q = P_q.shape[1]
     cov = np.zeros((q, q))
     known = np.zeros(e.size, dtype=bool) if known is None else np.asarray(known, dtype=bool)
     if known.any():
         cov += JP[known].T @ JP[known]
+    influence = JP  # (m, q): each row's pull on the unknowns Q, in place (10^5 pings: 200 MB a copy)
+    influence *= e[:, None]
     lags, rhos, counts = [], [], []
     for run in np.unique(row_run[~known]):
         rows = np.flatnonzero(row_run == run)
         t = row_time[rows]
         width = float(bin_s[int(run)])
         b = np.floor((t - t.min()) / width).astype(int)
-        series = np.zeros((b.max() + 1, q))
-        np.add.at(series, b, influence[rows])
+        pull = influence[rows[0]:rows[-1] + 1] if rows[-1] - rows[0] + 1 == rows.size else influence[rows]  # a view if contiguous
+        series = np.stack([np.bincount(b, weights=pull[:, j], minlength=b.max() + 1) for j in range(q)], axis=1) \
+            if q else np.zeros((b.max() + 1, 0))  # per-bin sums (np.add.at took 0.3 s at 10^5 pings)
         series = series[np.bincount(b, minlength=b.max() + 1) > 0]
         L, rho = andrews_lags(series)
         cov += newey_west(series, L)
