@@ -27,6 +27,10 @@ from importlib.metadata import PackageNotFoundError as _NotInstalled
 from importlib.metadata import version as _version
 
 # absolute, not relative: pytest (importlib mode) also imports this file on its own, as the rootdir's package
+from adcpdyn.memory import configure_huge_pages as _configure_huge_pages
+
+_configure_huge_pages()  # numpy's huge-page advice off unless NUMPY_MADVISE_HUGEPAGE says (adcpdyn.memory)
+
 from adcpdyn.api import (CORRECTION_METHODS, FIGURE_FORMATS, REFERENCES, TIMINGS, Comparison, ImportedCase, calibrate,
                          compare, correct, diagnose, export, import_file, read_calibration, read_case, simulate,
                          to_xarray)
