@@ -69,6 +69,8 @@ def test_readme_measured_table_reads_the_committed_runs():
     one = next(r for r in day["rows"] if r["runs"] == 20 and r["placement"] == "one_core")
     dask = next(r for r in day["rows"] if r["runs"] == 20 and r["placement"] == "dask")
     joint = next(r for r in day["rows"] if "diagnosis_s" in r)
+    scale = {r["n_pings"]: r for r in _result("scale.json")["rows"]}
+    big, ten_k = scale[max(scale)], scale[min(scale, key=lambda n: abs(n - 10_000))]
     nav = _result("navigation.json")
     rp = {r["navigation"]: r for r in nav["files"] if r["file"] == "RiverPro_test01.PD0"}
     survey = {r["navigation"]: r for r in nav["survey"]}
@@ -80,7 +82,9 @@ def test_readme_measured_table_reads_the_committed_runs():
                    f"Dask 2 workers {dask['calibration_s']:.1f} s; joint diagnosis {joint['diagnosis_s']:.0f} s",
                    f"({rp['random_walk']['misalignment_se_deg']:.2f} vs {rp['knots']['misalignment_se_deg']:.2f} deg on "
                    f"RiverPro); a two-run survey of winriver02 {survey['random_walk']['misalignment_se_deg']:.2f} vs "
-                   f"{survey['knots']['misalignment_se_deg']:.2f} deg"):
+                   f"{survey['knots']['misalignment_se_deg']:.2f} deg",
+                   f"| {big['calibration_s']:.1f} s (10^4: {ten_k['calibration_s']:.1f} s;",
+                   f"peak {big['peak_rss_mb'] / 1000:.2f} GB with the simulation"):
         assert figure in readme
 
 
