@@ -62,8 +62,11 @@ DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the 
 JACOBIANS = ("auto", "symbolic", "assembled")
 ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is assembled per row
 COMPILES = ("auto", "always", "never")
-COMPILE_MIN_PINGS = 5_000  # pings (all runs) from which the per-ping models are compiled under --compile auto (the
-# first compile, about 2 s once per machine, pays from here: 3000 pings 3.2 -> 1.1 s, 10^4 8.0 -> 3.6 s warm)
+# pings (all runs) from which --compile auto compiles the per-ping models (and so assembles the Jacobian): 8 starts
+# warm, 501 pool_m0 pings 2.1 -> 0.8 s, deep_ship (601) 30.7 -> 9.4 s; winriver02 (830, 24 starts) 19.4 -> 6.3 s,
+# 10.9 s with an empty cache (its six models compiled once per machine); below, winriver01 (261) gains 15.8 -> 10.1 s
+# but RiverPro (272, 171 unknowns) loses 2.5 -> 2.9 s, and unit-sized runs would pay the compiler first
+COMPILE_MIN_PINGS = 500
 MOVING_BED_CHOICES = ("auto", "off", "constant", "section")
 DEVIATION_CHOICES = ("auto", "on", "off")
 SE_METHODS = ("hac", "white")
@@ -173,7 +176,8 @@ class CalibrationConfig:
         The assembled problem's per-ping model (bottom track with its gradient, per-row
         Jacobians) as machine code from the per-machine cache (:mod:`~adcpdyn.solvers.compiled`,
         built by the system C compiler the first time; the same numbers as interpreted):
-        ``auto`` for problems of at least ``COMPILE_MIN_PINGS`` pings (all runs), ``always`` (needs
+        ``auto`` for problems of at least ``COMPILE_MIN_PINGS`` pings (all runs; the Jacobian then
+        assembled unless ``jacobian='symbolic'``, which compiles nothing), ``always`` (needs
         ``jacobian='assembled'``) or ``never``.
     solver : SolverOptions
     """
@@ -356,10 +360,9 @@ class CalibrationProblem:
         x = model.x
         z = ca.MX.sym("z", x.shape[0])
         raw = model.raw
-        self.assembled = not self.walk and (config.jacobian == "assembled" or (
+        # compiled models are evaluated by the assembled Jacobian (jacobian 'symbolic' compiles nothing)
+        self.assembled = not self.walk and (config.jacobian == "assembled" or model.compiled or (
             config.jacobian == "auto" and model.assembled_nodes > ASSEMBLED_MIN_NODES))
-        if model.compiled and not self.assembled:  # COMPILE_MIN_PINGS lies far above ASSEMBLED_MIN_NODES' pings
-            raise RuntimeError("compiled per-ping models are for the assembled Jacobian; this problem is symbolic")
         self.threads = default_threads(config.workers, config.n_starts) if self.assembled else 1
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
         weights = ca.MX.sym("w", raw.shape[0])
