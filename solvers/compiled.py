@@ -2,7 +2,8 @@
 
 CasADi generates the C code of a Function (with its first-order reverse derivative when a
 solver's gradient goes through it); the code's hash, with the compiler command and CasADi's
-version, names a shared library in the cache folder. The system C compiler builds it there the
+version (and the CPU, for code built for its instruction set: ``NATIVE_FLAGS``, IEEE arithmetic
+kept), names a shared library in the cache folder. The system C compiler builds it there the
 first time (written under a temporary name, then renamed: parallel workers never see half a
 library) and ``casadi.external`` loads it from then on, so one compilation serves every case,
 process and worker that uses the same per-ping model. The folder is ``$ADCPDYN_CACHE``, else
@@ -13,6 +14,7 @@ Function is returned as it was (interpreted: the same numbers, slower) and the r
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import platform
@@ -24,7 +26,11 @@ from pathlib import Path
 import casadi as ca
 
 CACHE_ENV = "ADCPDYN_CACHE"
-FLAGS = ("-O2", "-fPIC", "-shared")
+PORTABLE_FLAGS = ("-O2", "-fPIC", "-shared")
+# this CPU's instruction set (VEX-encoded code calling libm's AVX/FMA variants of sin, cos and exp) with IEEE
+# arithmetic kept (no fused multiply-add contraction: the numbers stay the interpreted ones): the exact per-ping
+# solve on 10^5 deep_ocean pings 0.124 -> 0.102 s, the closed form 0.067 -> 0.047 s
+NATIVE_FLAGS = ("-O2", "-march=native", "-ffp-contract=off", "-fPIC", "-shared")
 SUFFIX = ".so"
 
 last_failure: str | None = None  # why the last compilation fell back to the interpreted Function
@@ -51,6 +57,35 @@ def available() -> bool:
     return compiler() is not None
 
 
+@functools.lru_cache(maxsize=4)
+def _flags_for(cc: str) -> tuple:
+    """NATIVE_FLAGS if ``cc`` builds a library with them (some compilers or targets refuse
+    ``-march=native``), else PORTABLE_FLAGS."""
+    with tempfile.TemporaryDirectory(prefix="adcpdyn-cc-") as tmp:
+        source = Path(tmp) / "probe.c"
+        source.write_text("double probe(double x) { return x * x; }\n")
+        done = subprocess.run([cc, *NATIVE_FLAGS, str(source), "-o", str(Path(tmp) / "probe.so")], capture_output=True)
+    return NATIVE_FLAGS if done.returncode == 0 else PORTABLE_FLAGS
+
+
+def flags() -> tuple:
+    """The compiler flags the cache's libraries are built with on this machine."""
+    cc = compiler()
+    return _flags_for(cc) if cc else PORTABLE_FLAGS
+
+
+@functools.lru_cache(maxsize=1)
+def _cpu() -> str:
+    """This CPU's identity (model and instruction-set flags): a library built for it is not loaded
+    on another CPU sharing the cache folder (a home directory on a network file system)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return platform.processor()
+    first = text.split("\n\n", 1)[0]
+    return "\n".join(line for line in first.splitlines() if line.split(":")[0].strip() in ("vendor_id", "model name", "flags"))
+
+
 def library_path(fun: ca.Function, reverse: bool = False) -> tuple[Path, str]:
     """Where ``fun``'s library lives in the cache, and its C code."""
     gen = ca.CodeGenerator(f"{fun.name()}.c", {"with_header": False})
@@ -58,7 +93,9 @@ def library_path(fun: ca.Function, reverse: bool = False) -> tuple[Path, str]:
     if reverse:
         gen.add(fun.reverse(1))  # named adj1_<name>: casadi.external finds it for the gradient
     code = gen.dump()
-    key = hashlib.sha256("\n".join([code, compiler() or "", *FLAGS, ca.__version__, platform.machine()]).encode())
+    build = flags()
+    cpu = _cpu() if build == NATIVE_FLAGS else ""
+    key = hashlib.sha256("\n".join([code, compiler() or "", *build, ca.__version__, platform.machine(), cpu]).encode())
     return cache_dir() / f"{fun.name()}_{key.hexdigest()[:20]}{SUFFIX}", code
 
 
@@ -77,7 +114,7 @@ def compiled(fun: ca.Function, reverse: bool = False) -> ca.Function:
             with tempfile.TemporaryDirectory(dir=path.parent, prefix=".build-") as tmp:
                 source, lib = Path(tmp) / f"{fun.name()}.c", Path(tmp) / path.name
                 source.write_text(code)
-                done = subprocess.run([cc, *FLAGS, str(source), "-o", str(lib), "-lm"], capture_output=True, text=True)
+                done = subprocess.run([cc, *flags(), str(source), "-o", str(lib), "-lm"], capture_output=True, text=True)
                 if done.returncode != 0:
                     last_failure = f"{cc} failed on {fun.name()}: {done.stderr.strip().splitlines()[-1:]}"
                     return fun

@@ -101,3 +101,22 @@ def test_calibrate_help_states_the_compile_threshold():
     sub = next(a for a in build_parser()._actions if a.dest == "command").choices["calibrate"]
     text = next(a.help for a in sub._actions if a.dest == "compile")
     assert f"{COMPILE_MIN_PINGS} pings or more" in text
+
+
+def test_a_compiler_refusing_native_code_builds_portable_libraries(cache, tmp_path, monkeypatch):
+    """-march=native where the compiler takes it, the portable flags where it does not (the
+    library's name changes with the flags, so neither is mistaken for the other)."""
+    real = compiled.compiler()
+    fussy = tmp_path / "fussy-cc"
+    fussy.write_text(f'#!/bin/sh\nfor a in "$@"; do [ "$a" = "-march=native" ] && exit 1; done\nexec {real} "$@"\n')
+    fussy.chmod(0o755)
+    assert compiled._flags_for(str(fussy)) == compiled.PORTABLE_FLAGS
+    native_path = compiled.library_path(_model())[0]
+    monkeypatch.setenv("CC", str(fussy))
+    f = compiled.compiled(_model())
+    assert isinstance(f, ca.Function)
+    if compiled._flags_for(real) == compiled.NATIVE_FLAGS:
+        assert compiled.library_path(_model())[0] != native_path
+    x, p = np.array([0.3, -1.2, 2.0]), np.array([0.5, -2.0])
+    assert np.allclose(np.asarray(f(x, p)[0]).ravel(), np.sin(x) * np.exp(0.5), rtol=1e-15, atol=0)
+    assert [e.name for e in compiled.entries()] == [compiled.library_path(_model())[0].name]
