@@ -81,25 +81,6 @@ class AssembledLeastSquares:
         return _Objective(self, n_x, n_p, objective), _Gradient(self, n_x, n_p)
 
 
-class _LeastSquaresCallback(ca.Callback):
-    def __init__(self, oracle: AssembledLeastSquares, n_x: int, n_p: int, name: str):
-        ca.Callback.__init__(self)
-        self._oracle, self._n_x, self._n_p = oracle, n_x, n_p
-        self.construct(name, {})
-
-    def get_n_in(self):
-        return 2
-
-    def get_name_in(self, i):
-        return ("x", "p")[i]
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self._n_x if i == 0 else self._n_p, 1)
-
-    def has_eval_buffer(self):
-        return True  # the weights (one per residual) pass without a copy
-
-
 def _arrays(buffers, sizes=None) -> list:
     """numpy views of a buffer callback's memoryviews; an input CasADi passes as null (``sizes``
     given) is zeros, an output it does not ask for is None."""
@@ -108,29 +89,55 @@ def _arrays(buffers, sizes=None) -> list:
     return [np.zeros(n) if b is None else np.frombuffer(b, dtype=np.float64) for b, n in zip(buffers, sizes)]
 
 
-class _Objective(_LeastSquaresCallback):
+class _BufferCallback(ca.Callback):
+    """A callback on dense column inputs (and outputs, unless a subclass says otherwise) of the given
+    sizes, evaluated straight on the solver's buffers: the weights (one per residual) pass without a
+    copy. Subclasses set their own fields before calling this constructor (it constructs)."""
+
+    def __init__(self, name: str, inputs: dict, outputs: dict):
+        ca.Callback.__init__(self)
+        self._inputs, self._outputs = list(inputs.items()), list(outputs.items())
+        self.construct(name, {})
+
+    def get_n_in(self):
+        return len(self._inputs)
+
+    def get_n_out(self):
+        return len(self._outputs)
+
+    def get_name_in(self, i):
+        return self._inputs[i][0]
+
+    def get_name_out(self, i):
+        return self._outputs[i][0]
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self._inputs[i][1], 1)
+
+    def get_sparsity_out(self, i):
+        return ca.Sparsity.dense(self._outputs[i][1], 1)
+
+    def has_eval_buffer(self):
+        return True
+
+    def _args(self, arg) -> list:
+        return _arrays(arg, [n for _, n in self._inputs])
+
+
+class _Objective(_BufferCallback):
     """f = 0.5 |e|^2, with its reverse derivative (:class:`_ObjectiveReverse`): CasADi builds the
     Lagrangian's gradient Function when IPOPT is created, though with ``grad_f`` given and
     ``calc_lam_p`` off it never calls it."""
 
-    def __init__(self, oracle, n_x, n_p, objective: ca.Function):
-        self._objective = objective  # (x, p) -> f as a graph: only its derivative in p is taken from it
-        self._reverse = None
-        super().__init__(oracle, n_x, n_p, "least_squares_objective")
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_out(self, i):
-        return "f"
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, 1)
+    def __init__(self, oracle: AssembledLeastSquares, n_x: int, n_p: int, objective: ca.Function):
+        self._oracle, self._objective = oracle, objective  # the graph: only its derivative in p is taken from it
+        self._reverse = None  # the reverse callback, kept alive here as long as CasADi may call it
+        super().__init__("least_squares_objective", {"x": n_x, "p": n_p}, {"f": 1})
 
     def eval_buffer(self, arg, res):
         (out,) = _arrays(res)
         if out is not None:
-            e = self._oracle.residuals(*_arrays(arg, (self._n_x, self._n_p)))
+            e = self._oracle.residuals(*self._args(arg))
             out[0] = 0.5 * float(e @ e)
         return 0
 
@@ -138,57 +145,39 @@ class _Objective(_LeastSquaresCallback):
         return nadj == 1
 
     def get_reverse(self, nadj, name, inames, onames, opts):
-        self._reverse = _ObjectiveReverse(self._oracle, self._n_x, self._n_p, self._objective, name)
+        self._reverse = _ObjectiveReverse(self._oracle, self._objective, name, inames, onames)
         return self._reverse
 
 
-class _ObjectiveReverse(ca.Callback):
+class _ObjectiveReverse(_BufferCallback):
     """``(x, p, f, adj_f) -> (adj_f J^T e, adj_f df/dp)``: the x part from the assembled Jacobian, the
     p part from the objective's graph, whose reverse sweep is derived on the first call that needs it."""
 
-    def __init__(self, oracle, n_x, n_p, objective: ca.Function, name: str):
-        ca.Callback.__init__(self)
-        self._oracle, self._n_x, self._n_p, self._objective = oracle, n_x, n_p, objective
-        self._by_p = None
-        self.construct(name, {})
+    def __init__(self, oracle: AssembledLeastSquares, objective: ca.Function, name: str, inames, onames):
+        self._oracle, self._objective, self._by_p = oracle, objective, None
+        n_x, n_p = objective.size1_in(0), objective.size1_in(1)
+        super().__init__(name, dict(zip(inames, (n_x, n_p, 1, 1))), dict(zip(onames, (n_x, n_p))))
 
-    def get_n_in(self):
-        return 4
-
-    def get_n_out(self):
-        return 2
-
-    def get_sparsity_in(self, i):
-        return (ca.Sparsity.dense(self._n_x, 1), ca.Sparsity.dense(self._n_p, 1), ca.Sparsity.dense(1, 1),
-                ca.Sparsity.dense(1, 1))[i]
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(self._n_x if i == 0 else self._n_p, 1)
-
-    def eval(self, arg):
-        x, p, adj = arg[0].full().ravel(), arg[1].full().ravel(), float(arg[3])
-        if self._by_p is None:
-            self._by_p = self._objective.reverse(1)
-        _, grad = self._oracle.gradient(x, p)
-        return [ca.DM(adj * grad), self._by_p(arg[0], arg[1], arg[2], arg[3])[1]]
+    def eval_buffer(self, arg, res):
+        x, p, f, adj = self._args(arg)
+        by_x, by_p = _arrays(res)
+        if by_x is not None:
+            by_x[...] = adj[0] * self._oracle.gradient(x, p)[1]
+        if by_p is not None:
+            if self._by_p is None:
+                self._by_p = self._objective.reverse(1)
+            by_p[...] = np.asarray(self._by_p(x, p, f, adj)[1]).ravel()
+        return 0
 
 
-class _Gradient(_LeastSquaresCallback):
-    def __init__(self, oracle, n_x, n_p):
-        super().__init__(oracle, n_x, n_p, "nlp_grad_f")
-
-    def get_n_out(self):
-        return 2
-
-    def get_name_out(self, i):
-        return ("f", "grad_f_x")[i]
-
-    def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, 1) if i == 0 else ca.Sparsity.dense(self._n_x, 1)
+class _Gradient(_BufferCallback):
+    def __init__(self, oracle: AssembledLeastSquares, n_x: int, n_p: int):
+        self._oracle = oracle
+        super().__init__("nlp_grad_f", {"x": n_x, "p": n_p}, {"f": 1, "grad_f_x": n_x})
 
     def eval_buffer(self, arg, res):
         f_out, grad_out = _arrays(res)
-        x, p = _arrays(arg, (self._n_x, self._n_p))
+        x, p = self._args(arg)
         if grad_out is not None:
             f, grad_out[...] = self._oracle.gradient(x, p)
         elif f_out is not None:
@@ -199,7 +188,7 @@ class _Gradient(_LeastSquaresCallback):
         return 0
 
 
-class GaussNewtonHessian(ca.Callback):
+class GaussNewtonHessian(_BufferCallback):
     """``nlp_hess_l(x, p, lam_f, lam_g) -> sigma * triu(J^T J)`` (or the whole J^T J, ``upper=False``,
     for solvers that take a symmetric Hessian) from an assembled Jacobian."""
 
@@ -209,12 +198,9 @@ class GaussNewtonHessian(ca.Callback):
         structural pattern, scipy) and ``n_z``, ``n_p``; if it has ``gram(x, p)`` (dense J^T J)
         that is used instead of forming J, and ``gram_sparsity()`` J^T J's pattern. ``oracle``:
         where the gradient at the same point already formed J^T J."""
-        ca.Callback.__init__(self)
         self._jac = jacobian
         self._oracle = oracle
-        self._n_g = n_g
-        self._n_x, self._n_p = jacobian.n_z, jacobian.n_p
-        self._upper = upper
+        self._n_x = jacobian.n_z
         if hasattr(jacobian, "gram_sparsity"):  # the Jacobian knows J^T J's pattern from its blocks
             PtP = jacobian.gram_sparsity().astype(float)
         else:
@@ -224,32 +210,14 @@ class GaussNewtonHessian(ca.Callback):
         self._hess_sp = ca.Sparsity.triplet(self._n_x, self._n_x, H.row.tolist(), H.col.tolist())
         rows, cols = self._hess_sp.get_triplet()
         self._rows, self._cols = np.asarray(rows), np.asarray(cols)
-        self.construct(name, {})
-
-    def get_n_in(self):
-        return 4
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ("x", "p", "lam_f", "lam_g")[i]
-
-    def get_name_out(self, i):
-        return "triu_hess_gamma_x_x" if self._upper else "hess_gamma_x_x"
-
-    def get_sparsity_in(self, i):
-        return (ca.Sparsity.dense(self._n_x, 1), ca.Sparsity.dense(self._n_p, 1), ca.Sparsity.scalar(),
-                ca.Sparsity.dense(self._n_g, 1))[i]
+        super().__init__(name, {"x": self._n_x, "p": jacobian.n_p, "lam_f": 1, "lam_g": n_g},
+                         {"triu_hess_gamma_x_x" if upper else "hess_gamma_x_x": None})
 
     def get_sparsity_out(self, i):
         return self._hess_sp
 
-    def has_eval_buffer(self):
-        return True  # the weights (one per residual) pass without a copy
-
     def eval_buffer(self, arg, res):
-        x, p, lam_f = _arrays(arg[:3], (self._n_x, self._n_p, 1))
+        x, p, lam_f, _ = self._args(arg)
         (out,) = _arrays(res)
         if out is not None:
             out[...] = self._values(x, p) * lam_f[0]

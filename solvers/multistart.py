@@ -115,7 +115,7 @@ def resolved_hessian(options: SolverOptions, residuals=None) -> str:
     if options.hessian != "auto":
         return options.hessian
     rule = METHODS[options.method].auto
-    assembled = residuals is not None and hasattr(type(residuals), "sparsity") and not isinstance(residuals, ca.Function)
+    assembled = _assembled(residuals) or isinstance(residuals, (ca.SX, ca.MX))  # or the residual vector itself
     if rule == "size":
         size = residuals.size1_out(0) * residuals.size2_out(0) if isinstance(residuals, ca.Function) else 0
         return "gauss-newton" if assembled or (residuals is not None and size > AUTO_GN_SIZE) else "exact"
