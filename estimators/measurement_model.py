@@ -41,7 +41,7 @@ from ..models.measurement import bottom_track_function
 from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE, AttitudeParams, SampledAttitude,
                              attitude_function, evaluate_attitude, heading_corrected_function, local_attitude_function,
                              with_extra_mode)
-from ..models.rotations import course_difference_rad, euler_matrix, unskew
+from ..models.rotations import course_difference_rad, euler_matrix, euler_matrix_and_rate, unskew
 from ..models.sensors import compass_correction, reference_point_velocity
 from ..solvers.compiled import compiled
 from .asc import asc
@@ -668,8 +668,7 @@ class SurveyModel:
         for (e, _), th in zip(terms, ths):
             tilt = e.sampled_tilt(tilt, p[5:7], th, lead=run.sample_tilt_lead_s)
         ypr_s = ca.vertcat(ypr[0], tilt)
-        Lam_s = euler_matrix(ypr_s[0], ypr_s[1], ypr_s[2])
-        dLam_s = ca.reshape(ca.jacobian(ca.vec(Lam_s), t), 3, 3)
+        Lam_s, dLam_s, _ = euler_matrix_and_rate(ypr_s, ca.jacobian(ypr_s, t))
         slow = p[7]  # the deviation's argument: the slow heading, not the reading's noise (errors in variables)
         delta = compass_correction(slow, h[0], h[1], h[2], *self.heading_centre) if self.heading is not None else 0
         for (e, _), th in zip(terms, ths):

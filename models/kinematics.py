@@ -35,9 +35,15 @@ def angular_velocity_tensor(Lam, dLam):
     return ca.mtimes(dLam, Lam.T)
 
 
-def tangential_velocity_earth(dLam, r):
-    """Earth-frame tangential velocity dLambda/dt r_i of each transducer, rows (4, 3) (Eqs. 22, 24)."""
-    return ca.mtimes(r, dLam.T)
+def tangential_velocity_earth(Lam, omega, r):
+    """Earth-frame tangential velocity dLambda/dt r_i = omega x Lambda r_i of each transducer, rows
+    (4, 3) (Eqs. 22, 24), with omega the Earth-frame angular velocity (the axial vector of Omega,
+    Eq. 32): the cross product costs half of dLambda/dt's nine entries, and Lambda r_i is the
+    transducers' position anyway."""
+    rot = ca.mtimes(r, Lam.T)
+    w = ca.repmat(ca.reshape(omega, 1, 3), rot.shape[0], 1)
+    return ca.horzcat(w[:, 1] * rot[:, 2] - w[:, 2] * rot[:, 1], w[:, 2] * rot[:, 0] - w[:, 0] * rot[:, 2],
+                      w[:, 0] * rot[:, 1] - w[:, 1] * rot[:, 0])
 
 
 def tangential_velocity_paper_literal(Omega, r):
@@ -45,9 +51,9 @@ def tangential_velocity_paper_literal(Omega, r):
     return ca.mtimes(r, Omega.T)
 
 
-def transducer_velocity_earth(dLam, r, vessel_velocity):
-    """V_Ti = dLambda/dt r_i + V_a (Eq. 24), rows (4, 3)."""
-    return tangential_velocity_earth(dLam, r) + ca.repmat(ca.reshape(vessel_velocity, 1, 3), 4, 1)
+def transducer_velocity_earth(Lam, omega, r, vessel_velocity):
+    """V_Ti = dLambda/dt r_i + V_a (Eq. 24), rows (4, 3); omega as :func:`tangential_velocity_earth`."""
+    return tangential_velocity_earth(Lam, omega, r) + ca.repmat(ca.reshape(vessel_velocity, 1, 3), 4, 1)
 
 
 def transducer_positions_earth(Lam, r, centre_of_rotation):
@@ -79,12 +85,12 @@ def transducer_state_function(attitude_fun: ca.Function) -> ca.Function:
     r = ca.SX.sym("r", 4, 3)
     ypr_tb = ca.SX.sym("installation_ypr", 3)
     b_t = ca.SX.sym("beam_dirs_t", 4, 3)
-    _, Lam, dLam, _, _ = attitude_fun(t, p)
+    _, Lam, dLam, _, omega = attitude_fun(t, p)
     Ltb = euler_matrix(ypr_tb[0], ypr_tb[1], ypr_tb[2])
     return ca.Function(
         "transducer_state",
         [t, p, r, ypr_tb, b_t],
-        [Lam, dLam, beam_directions_earth(Lam, Ltb, b_t), tangential_velocity_earth(dLam, r), ca.mtimes(r, Lam.T)],
+        [Lam, dLam, beam_directions_earth(Lam, Ltb, b_t), tangential_velocity_earth(Lam, omega, r), ca.mtimes(r, Lam.T)],
         ["t", "p", "r", "installation_ypr", "beam_dirs_t"],
         ["Lambda", "dLambda_dt", "d", "v_tan", "rot"],
     )

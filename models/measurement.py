@@ -123,10 +123,10 @@ def _echo(attitude_fun, timing, tangential, t_T, depth, g_depth, c, v_a, p, r, y
     Lst = euler_matrix(ypr_st[0], ypr_st[1], ypr_st[2])
 
     def state(t):
-        _, Lam, dLam, Omega, _ = attitude_fun(t, p)
+        _, Lam, _, Omega, omega = attitude_fun(t, p)
         d = beam_directions_earth(Lam, Lst, b_t)  # Eqs. 26-29
         if tangential == "consistent":
-            v = transducer_velocity_earth(dLam, r, v_a)  # Eq. 24
+            v = transducer_velocity_earth(Lam, omega, r, v_a)  # Eq. 24
         else:
             v = tangential_velocity_paper_literal(Omega, r) + ca.repmat(v_a.T, 4, 1)  # Eqs. 31, 49
         z = g_depth + ca.mtimes(r, Lam[2, :].T)  # depth of each transducer (Eq. 66)

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .rotations import euler_matrix, unskew
+from .rotations import euler_matrix, euler_matrix_and_rate, skew, unskew
 
 def damped_mode(t, amplitude, t0, omega, decay):
     """Free decay released at t0 with zero rate (Eqs. 34, 41-42)."""
@@ -414,10 +414,9 @@ def heading_corrected_function(attitude_fun: ca.Function, mean_sin: float = 0.0,
 
 
 def _attitude_from_ypr(t, p, ypr) -> ca.Function:
-    Lam = euler_matrix(ypr[0], ypr[1], ypr[2])
-    dLam = ca.reshape(ca.jacobian(ca.vec(Lam), t), 3, 3)
-    Omega = ca.mtimes(dLam, Lam.T)
-    omega = unskew(Omega)
+    Lam, dLam, w_b = euler_matrix_and_rate(ypr, ca.jacobian(ypr, t))
+    omega = ca.mtimes(Lam, w_b)  # Omega = dLambda/dt Lambda^T = Lambda skew(w_b) Lambda^T = skew(Lambda w_b)
+    Omega = skew(omega)
     return ca.Function(
         "attitude",
         [t, p],

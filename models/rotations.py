@@ -48,7 +48,41 @@ def rot_z(psi):
 
 def euler_matrix(yaw, pitch, roll):
     """R = Rz(yaw) Ry(pitch) Rx(roll): Lambda(t) (Eq. 7) and Lambda_tb (Eq. 6)."""
-    return ca.mtimes([rot_z(yaw), rot_y(pitch), rot_x(roll)])
+    return _euler_matrix(ca.cos(yaw), ca.sin(yaw), ca.cos(pitch), ca.sin(pitch), ca.cos(roll), ca.sin(roll))
+
+
+def _euler_matrix(cy, sy, cp, sp, cr, sr):
+    # Rz Ry Rx multiplied out
+    return ca.vertcat(
+        ca.horzcat(cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr),
+        ca.horzcat(sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr),
+        ca.horzcat(-sp, cp * sr, cp * cr),
+    )
+
+
+def euler_matrix_and_rate(ypr, ypr_rate):
+    """Lambda = Rz Ry Rx (:func:`euler_matrix`) and its time derivative dLambda/dt = Lambda
+    skew(w_b) for Euler angles changing at ``ypr_rate`` (rad/s), with w_b the body-frame angular
+    velocity (:func:`body_rates`). The identity is exact (Lambda orthonormal), and costs a third
+    of differentiating Lambda's nine products (the per-ping models evaluate it nine times a
+    ping); one set of sines and cosines serves both. Returns (Lambda, dLambda_dt, w_b)."""
+    cy, sy = ca.cos(ypr[0]), ca.sin(ypr[0])
+    cp, sp = ca.cos(ypr[1]), ca.sin(ypr[1])
+    cr, sr = ca.cos(ypr[2]), ca.sin(ypr[2])
+    Lam = _euler_matrix(cy, sy, cp, sp, cr, sr)
+    w_b = _body_rates(cp, sp, cr, sr, ypr_rate)
+    return Lam, ca.mtimes(Lam, skew(w_b)), w_b
+
+
+def body_rates(ypr, ypr_rate):
+    """Body-frame angular velocity (rad/s, x bow, y starboard, z down) of Euler angles (yaw,
+    pitch, roll) changing at ``ypr_rate``: skew(w_b) = Lambda^T dLambda/dt for Lambda = Rz Ry Rx."""
+    return _body_rates(ca.cos(ypr[1]), ca.sin(ypr[1]), ca.cos(ypr[2]), ca.sin(ypr[2]), ypr_rate)
+
+
+def _body_rates(cp, sp, cr, sr, rate):
+    # Rx^T Ry^T (0, 0, yaw') + Rx^T (0, pitch', 0) + (roll', 0, 0)
+    return ca.vertcat(rate[2] - sp * rate[0], cr * rate[1] + sr * cp * rate[0], cr * cp * rate[0] - sr * rate[1])
 
 
 def matrix_euler(R):
