@@ -26,6 +26,7 @@ from ..solvers.ping_map import CHUNK
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
+GRAM_ROWS = 1024  # rows a weighted per-row Jacobian chunk holds in the Gram sum (a few MB: stays in cache)
 
 
 def _pattern_of(sparsity: ca.Sparsity) -> sp.csr_matrix:
@@ -237,15 +238,16 @@ class RowJacobian:
             scratch[index] = np.empty(shape)
         return scratch[index]
 
-    def _parts(self, z, w):
-        """Per block: its rows r (k n,), its shared columns c, the weighted shared-column part
-        (k n, len(c)) dense, and the weighted knot part (k n, n_z) sparse (None without knots).
-        The shared-column part is this thread's scratch array: valid until the next call."""
+    def _parts(self, z, w, only=None):
+        """Per block (those in ``only``; None: all): its rows r (k n,), its shared columns c, the
+        weighted shared-column part (k n, len(c)) dense, and the weighted knot part (k n, n_z)
+        sparse (None without knots). The shared-column part is this thread's scratch array: valid
+        until the next call."""
         w = np.asarray(w, dtype=float).ravel()
-        s, ds_dz = self._shared(z)
-        s = s.full().ravel()
-        ds_dz = ds_dz.sparse().tocsr()
+        s, ds_dz = self._shared_at(z)
         for index, b in enumerate(self.blocks):
+            if only is not None and index not in only:
+                continue
             k, n = b.fun.size1_out(0), b.data.shape[1]
             sc, knot_columns = self._cols[index], self._knots[index]
             v = np.zeros((n, 3))  # (n, 3): CasADi's column-major (3, n)
@@ -280,8 +282,49 @@ class RowJacobian:
 
     def gram_and_gradient(self, z, w, e: np.ndarray | None = None) -> tuple:
         """J^T J as :meth:`gram` and, with the residuals ``e`` (n_rows,), the gradient J^T e of
-        0.5 |e|^2 from the same pass over the blocks (None without ``e``)."""
-        return self._accumulate(self._parts(z, w), e)[:2]
+        0.5 |e|^2 from the same pass over the blocks (None without ``e``).
+
+        A block without knots is summed in its own shared inputs first, ds^T (sum_rows w^2 js^T js)
+        ds with js the per-row Jacobian in s: J's block (rows x its columns of z) is never formed."""
+        G = np.zeros((self.n_z, self.n_z))
+        grad = None if e is None else np.zeros(self.n_z)
+        w = np.asarray(w, dtype=float).ravel()
+        s, ds_dz = self._shared_at(z)
+        knotted = []
+        for index, b in enumerate(self.blocks):
+            if self._knot_index(index) is not None:
+                knotted.append(index)
+                continue
+            k, n = b.fun.size1_out(0), b.data.shape[1]
+            sc = self._cols[index]
+            _, js = self._evaluate(index, np.zeros((n, 3)), s[self._index[index]])
+            sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
+            rows = slice(b.offset, b.offset + k * n)
+            a = (w[rows].reshape(k, n) * sign[:, None]).T  # (n, k): row j's output i weighted and signed
+            ea = None if e is None else np.asarray(e[rows]).reshape(k, n).T
+            ns = js.shape[2]
+            M, g = np.zeros((ns, ns)), np.zeros(ns)
+            for lo in range(0, n, GRAM_ROWS):
+                hi = min(lo + GRAM_ROWS, n)
+                jw = (js[lo:hi] * a[lo:hi, :, None]).reshape(-1, ns)
+                M += jw.T @ jw
+                if ea is not None:
+                    g += jw.T @ ea[lo:hi].ravel()
+            ds_b = ds_dz[self._index[index]][:, sc].toarray()
+            G[np.ix_(sc, sc)] += ds_b.T @ M @ ds_b
+            if grad is not None:
+                grad[sc] += ds_b.T @ g
+        if knotted:
+            Gk, gk = self._accumulate(self._parts(z, w, only=knotted), e)
+            G += Gk
+            if grad is not None:
+                grad += gk
+        return G, grad
+
+    def _shared_at(self, z):
+        """s(z) (flat) and ds/dz (CSR)."""
+        s, ds_dz = self._shared(z)
+        return s.full().ravel(), ds_dz.sparse().tocsr()
 
     def jacobian_and_gram(self, z, w) -> tuple[sp.csr_matrix, np.ndarray]:
         """J as CSR and J^T J from one pass over the blocks (a sparse J^T J of 10^5 pings costs
