@@ -198,18 +198,14 @@ def _keyed(sources: list) -> list:
     return [dataclasses.replace(s, case=s.case.replace(name=Path(s.path).stem)) if s.path else s for s in sources]
 
 
-def _calibration_provenance(calibration, record) -> dict:
-    """What a correction records of the calibration it was given (``calibration``, read into
-    ``record``): file and SHA-256, or that it was in memory."""
-    from .cases.hashing import sha256_of
-
+def _calibration_provenance(record, given: str) -> dict:
+    """What a correction records of the calibration it was given (a ``given`` object read into
+    ``record``): the file it was read from with its SHA-256 then, or that it was in memory."""
     if record is None:
         return {"calibration_file": "none"}
-    if isinstance(calibration, (str, os.PathLike)):
-        return {"calibration_file": str(calibration), "calibration_sha256": sha256_of(calibration)}
-    if record.source and Path(record.source).is_file():  # a record read from a file
-        return {"calibration_file": record.source, "calibration_sha256": sha256_of(record.source)}
-    return {"calibration_file": f"none (a {type(calibration).__name__} in memory, not a file)"}
+    if record.source_sha256 is not None:
+        return {"calibration_file": record.source, "calibration_sha256": record.source_sha256}
+    return {"calibration_file": f"none (a {given} in memory, not a file)"}
 
 
 # ----------------------------------------------------------------------------------------------- read, import, simulate
@@ -451,7 +447,8 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     """
     from .cases.hashing import sha256_of
     from .estimators.calibration.record import as_record
-    from .estimators.correction.correct_case import as_calibrated_run, correct_case
+    from .estimators.calibration.identity import as_calibrated_run
+    from .estimators.correction.correct_case import correct_case
 
     _choice("method", method, CORRECTION_METHODS)
     _choice("timing", timing, TIMINGS)
@@ -470,16 +467,17 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     c, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
     notes = notes + applied
     result = correct_case(c, method, cal, timing, reference).with_provenance(
-        warnings=tuple(notes), **_calibration_provenance(calibration, cal),
+        warnings=tuple(notes), **_calibration_provenance(cal, type(calibration).__name__),
         calibration_provenance=(cal.provenance or None) if cal is not None else None,
         source_case_name=c.name, source_case_file=src.path,
         source_case_sha256=sha256_of(src.path) if src.path and Path(src.path).is_file() else None)
     if out is not None:
-        _write_correction(dataclasses.replace(src, case=c), result, out, calibration, history, attribution)
+        _write_correction(dataclasses.replace(src, case=c), result, out, cal, history, attribution)
     return result
 
 
-def _write_correction(src: _Source, result, out, calibration, history, attribution=None) -> None:
+def _write_correction(src: _Source, result, out, calibration: "CalibrationRecord | None", history,
+                      attribution=None) -> None:
     if Path(out).suffix.lower() != ".nc":
         from .cases.corrected import write_correction
 
@@ -490,7 +488,7 @@ def _write_correction(src: _Source, result, out, calibration, history, attributi
 
     ds = _to_xarray(src.case, result, provenance=src.provenance, source_case_path=src.path, history=history,
                     attribution=attribution)
-    inputs = [p for p in (src.path, calibration) if isinstance(p, (str, os.PathLike))]
+    inputs = [p for p in (src.path, None if calibration is None else calibration.source) if p]
     write_netcdf(ds, out, *inputs)
 
 
@@ -523,7 +521,8 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
 
     from .cases.coverage import reference_at
     from .estimators.calibration.record import as_record
-    from .estimators.correction.correct_case import as_calibrated_run, correct_case
+    from .estimators.calibration.identity import as_calibrated_run
+    from .estimators.correction.correct_case import correct_case
     from .estimators.statistics.metrics import velocity_metrics
 
     _choice("fmt", fmt, FIGURE_FORMATS)
@@ -616,7 +615,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         Too few pings, no attitude, an unknown effect or option (one line).
     """
     from .estimators.calibration.record import as_record
-    from .estimators.correction.correct_case import as_calibrated_run
+    from .estimators.calibration.identity import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
     _choice("fmt", fmt, FIGURE_FORMATS)
@@ -683,7 +682,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
     from .estimators.calibration.record import as_record
-    from .estimators.correction.correct_case import as_calibrated_run
+    from .estimators.calibration.identity import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
     _choice("fmt", fmt, FIGURE_FORMATS)

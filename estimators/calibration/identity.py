@@ -3,11 +3,15 @@ naming both), at the same site and season (warned otherwise).
 
 Another head's lever arms, installation angles and compass corrections applied to this one
 move every velocity without a trace; a calibration written before schema 3 does not say whose
-it is, and is applied with a note saying so.
+it is, and is applied with a note saying so. :func:`as_calibrated_run` also names the run as the
+calibration keys its runs.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
+from ...cases.case import Case
 from ...cases.identity import identity_of, instrument_difference, site_differences, site_of
 from .record import CalibrationRecord
 
@@ -44,3 +48,15 @@ def check_calibration_identity(calibration: CalibrationRecord | None, case, acce
             notes.append(f"{source} was made where and when {case.name} was not ({', '.join(far)}): an installation "
                          "remounted or a compass re-swung since would not show in it")
     return notes
+
+
+def as_calibrated_run(case: Case, path, calibration: CalibrationRecord | None,
+                      accept_other_instrument: bool = False) -> tuple[Case, list]:
+    """The run a calibration is applied to, and the notes on applying it: the calibration checked
+    to be this instrument's (:func:`check_calibration_identity`, a one-line
+    refusal otherwise), and the case named as the calibration keys its runs (by case name, or by
+    file name when the cases shared one) so that :meth:`CalibrationRecord.moving_bed_for` finds its own run."""
+    runs = [] if calibration is None else [r.case for r in calibration.runs]
+    if case.name not in runs and Path(path).stem in runs:
+        case = case.replace(name=Path(path).stem)
+    return case, check_calibration_identity(calibration, case, accept_other_instrument)

@@ -18,14 +18,14 @@ Imports run one way: file <- record <- result.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ...cases.identity import InstrumentIdentity, Site
 from .file import Calibration, calibration_from_dict, read_calibration, source_prefix
 
-__all__ = ["CalibrationRecord", "RunRecord", "as_record"]
+__all__ = ["AppliedCalibration", "CalibrationRecord", "RunRecord", "as_record"]
 
 
 def _array(value, shape) -> np.ndarray:
@@ -144,6 +144,8 @@ class CalibrationRecord:
         The runs' mean position and UTC span (schema 3).
     source : str
         The file it was read from ('' when built from a dict in memory).
+    source_sha256 : str or None
+        That file's SHA-256 when it was read (None when built in memory).
     data : Calibration
         The validated file itself (for display; the readers use the typed fields).
     """
@@ -185,6 +187,7 @@ class CalibrationRecord:
     data: Calibration = field(repr=False)
     instrument: InstrumentIdentity | None = None
     site: Site | None = None
+    source_sha256: str | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -196,7 +199,9 @@ class CalibrationRecord:
         ValueError
             One line naming the file and the key (see ``read_calibration``).
         """
-        return cls.from_dict(read_calibration(path))
+        from ...cases.hashing import sha256_of
+
+        return replace(cls.from_dict(read_calibration(path)), source_sha256=sha256_of(path))
 
     @classmethod
     def from_dict(cls, d) -> "CalibrationRecord":
@@ -308,12 +313,101 @@ class CalibrationRecord:
                                "missing; expected 3 angles in radians")
         return nominal.copy(), False
 
+    def applied_to(self, case_name: str, sensor_frame: str, dynamic: bool) -> AppliedCalibration:
+        """Everything the correction of one run takes from this calibration, resolved at once: the
+        run's bed and depth offset, the heading correction of a head sensor, and the installation
+        and lever arms the method needs (``dynamic``: the dynamic methods' lever arms and beam
+        rotation; else the static correction's installation angles, for a vessel-frame sensor),
+        each refused in one line here when the file does not determine it."""
+        return _applied_to(self, case_name, sensor_frame, dynamic)
+
     def compass_deviation_applied(self) -> tuple[float, float, float, float]:
         """(B, C, mean_sin, mean_cos) of the one-cycle compass deviation a head sensor's headings are
         corrected by (:func:`~adcpdyn.models.sensors.compass_correction`): a coefficient not
         determined (null) or absent is 0, the others are applied."""
         deviation = self.compass_deviation_rad or (0.0, 0.0)
         return (*(float(v) if np.isfinite(v) else 0.0 for v in deviation), *self.compass_deviation_centre)
+
+
+@dataclass(frozen=True, eq=False)
+class AppliedCalibration:
+    """What a calibration gives the correction of one run, resolved once where the correction
+    starts (:meth:`CalibrationRecord.applied_to`): the correction reads these fields and never goes
+    back to the record. Angles in radians, lengths in metres, velocities in m/s.
+
+    Attributes
+    ----------
+    run : str
+        The case name the values were resolved for.
+    sensor_frame : str
+        The run's attitude frame: ``vessel`` or ``transducer`` (sensor in the head).
+    lever_arms_sensor_m : ndarray (4, 3) or None
+        Lever arms in the sensor's frame (dynamic methods; None for the static correction).
+    beam_installation_ypr_rad : ndarray (3,) or None
+        Rotation of the beams into the sensor's frame (zero for a head sensor; dynamic methods).
+    static_installation_ypr_rad : ndarray (3,) or None
+        The static correction's installation angles (vessel-frame sensor; None otherwise), and
+        ``static_installation_determined``: calibrated (True) or the configured mounting (False).
+    heading_misalignment_rad : float or None
+        Applied to a head sensor's heading readings; None for a vessel-frame sensor or when the
+        calibration has none (``heading_note`` says which).
+    compass_deviation : tuple
+        (B, C, mean_sin, mean_cos) applied with the misalignment (undetermined coefficients 0).
+    compass_deviation_found : bool
+        Whether the calibration has a compass deviation (for the provenance).
+    magnetic_declination_rad, compass_error_rad : float or None
+    nominal_installation_ypr_rad : ndarray (3,) or None
+    attitude_source : str
+        ``model`` or ``samples``: what the calibration's beams used.
+    transducer_depth_offset_m : float or None
+        The run's depth offset found from the slant ranges (None or 0: none).
+    moving_bed_m_s : ndarray (2,) or None
+        The bed under the run (:meth:`CalibrationRecord.moving_bed_for`) and ``moving_bed_source``.
+    """
+
+    run: str
+    sensor_frame: str
+    lever_arms_sensor_m: np.ndarray | None
+    beam_installation_ypr_rad: np.ndarray | None
+    static_installation_ypr_rad: np.ndarray | None
+    static_installation_determined: bool
+    heading_misalignment_rad: float | None
+    heading_note: str
+    compass_deviation: tuple
+    compass_deviation_found: bool
+    magnetic_declination_rad: float | None
+    compass_error_rad: float | None
+    nominal_installation_ypr_rad: np.ndarray | None
+    attitude_source: str
+    transducer_depth_offset_m: float | None
+    moving_bed_m_s: np.ndarray | None
+    moving_bed_source: str
+
+
+def _applied_to(record: CalibrationRecord, case_name: str, sensor_frame: str, dynamic: bool) -> AppliedCalibration:
+    head = sensor_frame == "transducer"
+    static, determined = (record.installation_or_nominal() if not head and not dynamic else (None, False))
+    if dynamic:
+        lever = record.lever_arms_in("transducer" if head else "vessel")
+        beams = np.zeros(3) if head else record.installation()
+    else:
+        lever, beams = None, None
+    delta = record.heading_misalignment_rad if head else None
+    note = ("true heading = recorded heading + heading misalignment (+ compass deviation): the misalignment holds the "
+            "magnetic declination, not applied separately" if delta is not None else
+            "headings as recorded (vessel-frame attitude: installation angles instead)" if not head else
+            "headings as recorded (the calibration has no heading misalignment)")
+    own = record.run_for(case_name)
+    bed, source = record.moving_bed_for(case_name)
+    return AppliedCalibration(
+        run=case_name, sensor_frame=sensor_frame, lever_arms_sensor_m=lever, beam_installation_ypr_rad=beams,
+        static_installation_ypr_rad=static, static_installation_determined=determined, heading_misalignment_rad=delta,
+        heading_note=note, compass_deviation=record.compass_deviation_applied(),
+        compass_deviation_found=record.compass_deviation_rad is not None,
+        magnetic_declination_rad=record.magnetic_declination_rad, compass_error_rad=record.compass_error_rad,
+        nominal_installation_ypr_rad=record.nominal_installation_ypr_rad, attitude_source=record.attitude_source,
+        transducer_depth_offset_m=None if own is None else own.transducer_depth_offset_m, moving_bed_m_s=bed,
+        moving_bed_source=source)
 
 
 def as_record(calibration) -> CalibrationRecord | None:

@@ -37,7 +37,7 @@ from ...models.rotations import euler_matrix
 from ...models.sensors import compass_correction
 from ...cases.corrected import Correction, CorrectionProvenance
 from ..attitude_fit import fit_attitude, sampled_attitude
-from ..calibration.record import CalibrationRecord
+from ..calibration.record import AppliedCalibration, CalibrationRecord
 
 METHODS = ("adc", "paper_literal", "rootfinder", "oracle")
 
@@ -178,14 +178,7 @@ def _rootfind(case: Case, attitude: AttitudeParams, lever_arms_s, ypr_st, timing
     return V, err, n_good, info
 
 
-def lever_arms_from_calibration(calibration: CalibrationRecord, case: Case) -> tuple[np.ndarray, np.ndarray]:
-    """(lever arms in the case's sensor frame, installation angles for beams) from a calibration."""
-    if case.attitude.frame == "transducer":
-        return calibration.lever_arms_in("transducer"), np.zeros(3)
-    return calibration.lever_arms_in("vessel"), calibration.installation()
-
-
-def with_heading_misalignment(case: Case, calibration: CalibrationRecord | None) -> Case:
+def with_heading_misalignment(case: Case, applied: AppliedCalibration | None) -> Case:
     """The case with a head sensor's heading readings turned by the calibration's heading misalignment.
 
     For a sensor inside the head, the misalignment found against the reference (compass error,
@@ -194,16 +187,16 @@ def with_heading_misalignment(case: Case, calibration: CalibrationRecord | None)
     when the calibration found one (:func:`~adcpdyn.models.sensors.compass_correction`). Other
     cases are returned unchanged.
     """
-    delta = None if calibration is None else calibration.heading_misalignment_rad
+    delta = None if applied is None else applied.heading_misalignment_rad
     if delta is None or case.attitude.frame != "transducer":
         return case
     psi = case.attitude.heading_rad
-    correction = compass_correction(psi, delta, *calibration.compass_deviation_applied())
+    correction = compass_correction(psi, delta, *applied.compass_deviation)
     att = dataclasses.replace(case.attitude, heading_rad=psi + correction)
     return case.replace(attitude=att)
 
 
-def dynamic_correction(case: Case, method: str = "adc", calibration: CalibrationRecord | None = None,
+def dynamic_correction(case: Case, method: str = "adc", calibration: CalibrationRecord | AppliedCalibration | None = None,
                        attitude: AttitudeParams | None = None, timing: str = "deep",
                        rootfinder_options=None, water_reference: str = "bt") -> Correction:
     """Correct every ping of a case (see module docstring).
@@ -213,8 +206,10 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: Calibration
     case : Case
     method : str
         ``adc``, ``paper_literal``, ``rootfinder`` or ``oracle``.
-    calibration : CalibrationRecord
-        Lever arms, installation angles, heading correction, attitude source; not used by ``oracle``.
+    calibration : CalibrationRecord or AppliedCalibration
+        Lever arms, installation angles, heading correction, attitude source (a record is resolved
+        for this run once, :meth:`~adcpdyn.estimators.calibration.record.CalibrationRecord.applied_to`);
+        not used by ``oracle``.
     attitude : AttitudeParams, optional
         Attitude model of this run in the sensor frame (default: fitted to its samples).
     timing : str
@@ -248,8 +243,13 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: Calibration
     else:
         if calibration is None:
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
+        if isinstance(calibration, CalibrationRecord):
+            calibration = calibration.applied_to(case.name, case.attitude.frame, dynamic=True)
+        if calibration.lever_arms_sensor_m is None:
+            raise ValueError(f"calibration: resolved for the static correction (no lever arms); method {method!r} "
+                             "needs CalibrationRecord.applied_to(..., dynamic=True)")
         case = with_heading_misalignment(case, calibration)
-        lever, ypr_st = lever_arms_from_calibration(calibration, case)
+        lever, ypr_st = calibration.lever_arms_sensor_m, calibration.beam_installation_ypr_rad
         if attitude is None and calibration.attitude_source == "samples":  # as the calibration's beams
             attitude = sampled_attitude(case)
         attitude = attitude or fit_attitude(case).params

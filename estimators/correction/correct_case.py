@@ -7,16 +7,15 @@ import dataclasses
 import numpy as np
 
 from ...cases.case import Case
-from ..calibration.record import CalibrationRecord
+from ..calibration.record import AppliedCalibration, CalibrationRecord
 
 CORRECTION_METHODS = ("asc", "adc", "paper_literal", "rootfinder", "oracle")
 
 
-def with_calibrated_depth(case: Case, calibration: CalibrationRecord | None) -> tuple[Case, str]:
+def with_calibrated_depth(case: Case, applied: AppliedCalibration | None) -> tuple[Case, str]:
     """The case with the transducer depth its own calibration found from the slant ranges (the
     case's run of the calibration), and a note; unchanged without one."""
-    own = None if calibration is None else calibration.run_for(case.name)
-    offset = None if own is None else own.transducer_depth_offset_m
+    offset = None if applied is None else applied.transducer_depth_offset_m
     if offset is None or not np.isfinite(offset) or offset == 0:
         return case, ""
     env = case.environment
@@ -24,22 +23,6 @@ def with_calibrated_depth(case: Case, calibration: CalibrationRecord | None) -> 
     note = (f"transducer depth {env.transducer_depth_m:.3f} m -> {depth:.3f} m (offset {offset:+.3f} m the "
             "calibration found from the slant ranges)")
     return case.replace(environment=dataclasses.replace(env, transducer_depth_m=depth)), note
-
-
-def as_calibrated_run(case: Case, path, calibration: CalibrationRecord | None,
-                      accept_other_instrument: bool = False) -> tuple[Case, list]:
-    """The run a calibration is applied to, and the notes on applying it: the calibration checked
-    to be this instrument's (:func:`~.calibration.identity.check_calibration_identity`, a one-line
-    refusal otherwise), and the case named as the calibration keys its runs (by case name, or by
-    file name when the cases shared one) so that :meth:`CalibrationRecord.moving_bed_for` finds its own run."""
-    from pathlib import Path
-
-    from ..calibration.identity import check_calibration_identity
-
-    runs = [] if calibration is None else [r.case for r in calibration.runs]
-    if case.name not in runs and Path(path).stem in runs:
-        case = case.replace(name=Path(path).stem)
-    return case, check_calibration_identity(calibration, case, accept_other_instrument)
 
 
 def with_moving_bed(result, bed: np.ndarray, source: str):
@@ -69,45 +52,46 @@ def correct_case(case: Case, method: str, calibration: CalibrationRecord | None 
     result's ``provenance``.
 
     ``calibration``: the typed record (:func:`~adcpdyn.estimators.calibration.record.as_record`
-    reads every other form once, where it enters), or None."""
+    reads every other form once, where it enters), or None. What this run takes from it is
+    resolved once, here (:meth:`~adcpdyn.estimators.calibration.record.CalibrationRecord.applied_to`)."""
     from ..water import check_reference
 
     check_reference(reference)
+    if method not in CORRECTION_METHODS:
+        raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
+    applied = None if calibration is None or method == "oracle" else \
+        calibration.applied_to(case.name, case.attitude.frame, dynamic=method != "asc")
     entered = float(case.environment.transducer_depth_m)
-    case, depth_note = with_calibrated_depth(case, calibration) if method != "oracle" else (case, "")
-    result = _correct(case, method, calibration, timing, reference)
-    result = result.with_provenance(**heading_corrections_applied(case, calibration if method != "oracle" else None),
-                                    transducer_depth_entered_m=entered)
+    case, depth_note = with_calibrated_depth(case, applied)
+    result = _correct(case, method, applied, timing, reference)
+    result = result.with_provenance(**heading_corrections_applied(applied), transducer_depth_entered_m=entered)
     if depth_note:
         result = result.with_provenance(transducer_depth_note=depth_note,
                                         transducer_depth_calibrated_m=float(case.environment.transducer_depth_m))
     if method == "oracle":
         bed, source = _true_bed(case)
     else:
-        bed, source = (None, "") if calibration is None else calibration.moving_bed_for(case.name)
+        bed, source = (None, "") if applied is None else (applied.moving_bed_m_s, applied.moving_bed_source)
     return result if bed is None else with_moving_bed(result, bed, source)  # no bed: the provenance says none applied
 
 
-def heading_corrections_applied(case: Case, calibration: CalibrationRecord | None) -> dict:
+def heading_corrections_applied(applied: AppliedCalibration | None) -> dict:
     """What a correction did to the headings, as :class:`~adcpdyn.cases.corrected.CorrectionProvenance`
     fields: the heading misalignment and compass deviation applied to a head sensor's readings (the
     misalignment holds the magnetic declination, which is not applied again), with the calibration's
     declination and compass error for the record."""
-    delta = None if calibration is None else calibration.heading_misalignment_rad
-    if delta is None or case.attitude.frame != "transducer":
-        why = ("no calibration" if calibration is None else
-               "vessel-frame attitude: installation angles instead" if case.attitude.frame != "transducer" else
-               "the calibration has no heading misalignment")
-        return {"heading_misalignment_applied_rad": None, "heading_correction_note": f"headings as recorded ({why})",
-                "magnetic_declination_rad": None if calibration is None else calibration.magnetic_declination_rad}
+    if applied is None:
+        return {"heading_misalignment_applied_rad": None, "heading_correction_note": "headings as recorded (no calibration)",
+                "magnetic_declination_rad": None}
+    if applied.heading_misalignment_rad is None:
+        return {"heading_misalignment_applied_rad": None, "heading_correction_note": applied.heading_note,
+                "magnetic_declination_rad": applied.magnetic_declination_rad}
     return {
-        "heading_misalignment_applied_rad": delta,
-        "compass_deviation_applied_rad": None if calibration.compass_deviation_rad is None else
-        calibration.compass_deviation_applied(),
-        "magnetic_declination_rad": calibration.magnetic_declination_rad,
-        "compass_error_rad": calibration.compass_error_rad,
-        "heading_correction_note": ("true heading = recorded heading + heading misalignment (+ compass deviation): "
-                                    "the misalignment holds the magnetic declination, not applied separately"),
+        "heading_misalignment_applied_rad": applied.heading_misalignment_rad,
+        "compass_deviation_applied_rad": applied.compass_deviation if applied.compass_deviation_found else None,
+        "magnetic_declination_rad": applied.magnetic_declination_rad,
+        "compass_error_rad": applied.compass_error_rad,
+        "heading_correction_note": applied.heading_note,
     }
 
 
@@ -120,25 +104,23 @@ def _true_bed(case: Case) -> tuple[np.ndarray | None, str]:
     return np.array([beds[0]["velocity_north_m_s"], beds[0]["velocity_east_m_s"]]), "/truth (the simulated bed)"
 
 
-def _correct(case: Case, method: str, calibration: CalibrationRecord | None, timing: str, reference: str = "bt"):
+def _correct(case: Case, method: str, applied: AppliedCalibration | None, timing: str, reference: str = "bt"):
     from .adc import dynamic_correction, with_heading_misalignment
     from ..asc import asc
 
-    if method not in CORRECTION_METHODS:
-        raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
     if method == "asc":
         ypr, note = None, None
-        if calibration is not None and case.attitude.frame == "vessel":
-            ypr, determined = calibration.installation_or_nominal()
-            if not determined:
+        if applied is not None and applied.static_installation_ypr_rad is not None:
+            ypr = applied.static_installation_ypr_rad
+            if not applied.static_installation_determined:
                 note = (f"installation angles not determined by the calibration: its nominal angles "
                         f"{np.round(np.rad2deg(ypr), 3).tolist()} deg are used, as a static correction with the "
                         "configured alignment would; the Earth velocities carry the unknown installation error")
-        result = asc(with_heading_misalignment(case, calibration), ypr, water_reference=reference)
+        result = asc(with_heading_misalignment(case, applied), ypr, water_reference=reference)
         if note:
             result = result.with_provenance(installation_note=note)
     else:
-        result = dynamic_correction(case, method, calibration, timing=timing, water_reference=reference)
+        result = dynamic_correction(case, method, applied, timing=timing, water_reference=reference)
     if not np.any(result.beams_used >= 3):
         raise ValueError(f"{case.name}: /pings/bt_radial_m_s: expected pings with at least 3 valid beams (a velocity "
                          f"needs 3), got none of {case.pings.n}")
