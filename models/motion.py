@@ -45,8 +45,16 @@ def damped_mode(t, amplitude, t0, omega, decay):
 
 def mode_cs(t, c, s, omega, decay, t_ref):
     """exp(-v (t - t_ref)) [C cos n1 (t - t_ref) + S sin n1 (t - t_ref)]: Eq. 34 about t_ref."""
-    tau = t - t_ref
-    return ca.exp(-decay * tau) * (c * ca.cos(omega * tau) + s * ca.sin(omega * tau))
+    ec, es, _, _ = mode_basis(t - t_ref, omega, decay)
+    return c * ec + s * es
+
+
+def mode_basis(tau, omega, decay):
+    """(exp(-v tau) cos n1 tau, exp(-v tau) sin n1 tau) of Eq. 34 and their time derivatives, the
+    same pair turned: (-v ec - n1 es, -v es + n1 ec)."""
+    e = ca.exp(-decay * tau)
+    ec, es = e * ca.cos(omega * tau), e * ca.sin(omega * tau)
+    return ec, es, -decay * ec - omega * es, -decay * es + omega * ec
 
 
 def paper_to_cs(amplitude, t0, omega, decay, t_ref):
@@ -228,22 +236,36 @@ class AttitudeParams:
 
 def attitude_ypr(t, p, layout: AttitudeLayout):
     """Yaw, pitch, roll (3x1 expression) at time t for flat parameters p."""
+    return attitude_ypr_and_rate(t, p, layout)[0]
+
+
+def attitude_ypr_and_rate(t, p, layout: AttitudeLayout):
+    """Yaw, pitch, roll and their time derivatives (two 3x1 expressions) at time t (Eq. 34).
+
+    Each mode's basis pair and its derivative (:func:`mode_basis`) serve all three axes, so the
+    rates cost a few products instead of a derivative of each axis's sum."""
     s = layout.slices()
     modes = p[s["modes"]]
-    out = []
+    tau = t - layout.t_ref_s
+    basis = [mode_basis(tau, modes[2 * k], modes[2 * k + 1]) for k in range(layout.n_modes)]
+    values, rates = [], []
     for axis in ("yaw", "pitch", "roll"):
         cs = p[s[f"{axis}_cs"]]
         if axis == "yaw":
             trend = p[s["yaw_trend"]]
-            value = 0
+            value, rate = 0, 0
             for k in range(layout.yaw_trend_order + 1):
-                value = value + trend[k] * (t - layout.t_ref_s) ** k
+                value = value + trend[k] * tau ** k
+                if k:
+                    rate = rate + k * trend[k] * tau ** (k - 1)
         else:
-            value = p[s[f"{axis}_bias"]][0]
-        for k in range(layout.n_modes):
-            value = value + mode_cs(t, cs[2 * k], cs[2 * k + 1], modes[2 * k], modes[2 * k + 1], layout.t_ref_s)
-        out.append(value)
-    return ca.vertcat(*out)
+            value, rate = p[s[f"{axis}_bias"]][0], 0
+        for k, (ec, es, dec, des) in enumerate(basis):
+            value = value + cs[2 * k] * ec + cs[2 * k + 1] * es
+            rate = rate + cs[2 * k] * dec + cs[2 * k + 1] * des
+        values.append(value)
+        rates.append(rate)
+    return ca.vertcat(*values), ca.vertcat(*rates)
 
 
 def attitude_function(layout: AttitudeLayout, sym=ca.SX) -> ca.Function:
@@ -255,7 +277,7 @@ def attitude_function(layout: AttitudeLayout, sym=ca.SX) -> ca.Function:
     """
     t = sym.sym("t")
     p = sym.sym("p", layout.size)
-    return _attitude_from_ypr(t, p, attitude_ypr(t, p, layout))
+    return _attitude_from_ypr(t, p, *attitude_ypr_and_rate(t, p, layout))
 
 
 LOCAL_ATTITUDE_SIZE = 8
@@ -413,8 +435,8 @@ def heading_corrected_function(attitude_fun: ca.Function, mean_sin: float = 0.0,
     return ca.Function("attitude", [t2, p2], outputs, ["t", "p"], ["ypr", "Lambda", "dLambda_dt", "Omega", "omega"])
 
 
-def _attitude_from_ypr(t, p, ypr) -> ca.Function:
-    Lam, dLam, w_b = euler_matrix_and_rate(ypr, ca.jacobian(ypr, t))
+def _attitude_from_ypr(t, p, ypr, ypr_rate=None) -> ca.Function:
+    Lam, dLam, w_b = euler_matrix_and_rate(ypr, ca.jacobian(ypr, t) if ypr_rate is None else ypr_rate)
     omega = ca.mtimes(Lam, w_b)  # Omega = dLambda/dt Lambda^T = Lambda skew(w_b) Lambda^T = skew(Lambda w_b)
     Omega = skew(omega)
     return ca.Function(

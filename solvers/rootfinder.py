@@ -27,10 +27,12 @@ diagonal: beam i's echo depends on its own receive time), every derivative gener
 symbolically from the model's Functions; the exact residual (the attitude at the new
 receive times T(x1)) is evaluated at the result. The step leaves ~1e-13 m/s in shallow
 water; its error grows as the square of t0 - T(x), the closed form's receive times being
-~2e-5 s off in 300 m of water, where it leaves up to ~2e-10 m/s. Pings above
-``NEWTON_TARGET_RESIDUAL`` take Newton steps on arrays (the same formula at t0 = T(x): Newton's
-step with its exact Jacobian); pings still above ``NEWTON_RESIDUAL_TOL`` go to
-``casadi.rootfinder`` (Newton with a convergence test); pings it leaves above get NaN.
+~2e-5 s off in 300 m of water, where it leaves up to ~3e-10 m/s: inside the tolerance
+``NEWTON_RESIDUAL_TOL`` (1e-9 m/s, six orders below a bottom track's noise), so one step serves
+(a second, which took those pings to ~1e-13, cost the exact solve a tenth of its time on
+deep_ocean). Pings above the tolerance take Newton steps on arrays (the same formula at t0 = T(x):
+Newton's step with its exact Jacobian); pings still above go to ``casadi.rootfinder`` (Newton
+with a convergence test); pings it leaves above get NaN.
 
 Each per-ping Function is evaluated over all pings by :class:`~adcpdyn.solvers.ping_map.PingFunction`;
 the beams enter already turned into the sensor frame (shared by every ping), so no ping
@@ -52,8 +54,7 @@ from ..models.motion import LOCAL_ATTITUDE_SIZE, AttitudeLayout, attitude_functi
 from ..models.rotations import euler_matrix
 from .ping_map import MapOptions, PingFunction
 
-NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it after the Newton steps go to casadi.rootfinder
-NEWTON_TARGET_RESIDUAL = 1e-10  # m/s; pings above it take another Newton step while steps are left (rounding: ~1e-13)
+NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it take another Newton step while steps are left, then casadi.rootfinder
 N_PING_INPUTS = 6  # t_T, bottom depth, four measured radial velocities
 
 
@@ -278,14 +279,14 @@ def solve_bottom_track(layout: AttitudeLayout | None, attitude_p, lever_arms_m, 
         x, g = _exact(model)(q, s, options=options)
         res = norm(g)
     above = lambda r, tol: ~(r <= tol)  # NaN counts as above
-    more = np.flatnonzero(above(res, NEWTON_TARGET_RESIDUAL)) if options.steps > 1 else np.zeros(0, dtype=int)
+    more = np.flatnonzero(above(res, NEWTON_RESIDUAL_TOL)) if options.steps > 1 else np.zeros(0, dtype=int)
     todo = more
     for _ in range(options.steps - 1):
         if not todo.size:
             break
         x[todo], g = _newton(model)(x[todo], q[todo], s, options=options)
         res[todo] = norm(g)
-        todo = todo[above(res[todo], NEWTON_TARGET_RESIDUAL)]
+        todo = todo[above(res[todo], NEWTON_RESIDUAL_TOL)]
     todo = np.flatnonzero(above(res, NEWTON_RESIDUAL_TOL))
     if todo.size:
         x0 = np.nan_to_num(x[todo]).T

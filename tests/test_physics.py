@@ -115,6 +115,21 @@ def test_rate_identities_match_differentiating_lambda_to_rounding():
             assert float(ca.norm_inf(diff)) < 1e-13
 
 
+def test_attitude_rates_by_the_turned_mode_pair_equal_differentiating_the_angles():
+    """attitude_ypr_and_rate's rates (each mode's basis pair turned) against CasADi's derivative of
+    the angles, with a yaw trend of order 2 and three modes."""
+    from adcpdyn.models.motion import AttitudeLayout, attitude_ypr_and_rate
+
+    layout = AttitudeLayout(n_modes=3, yaw_trend_order=2, t_ref_s=5.0)
+    t, p = ca.SX.sym("t"), ca.SX.sym("p", layout.size)
+    ypr, rate = attitude_ypr_and_rate(t, p, layout)
+    f = ca.Function("f", [t, p], [ca.jacobian(ypr, t) - rate])
+    for _ in range(10):
+        params = RNG.uniform(-1, 1, layout.size)
+        params[layout.slices()["modes"]] = np.ravel([[RNG.uniform(0.3, 3), RNG.uniform(0, 0.3)] for _ in range(3)])
+        assert float(ca.norm_inf(f(RNG.uniform(-5, 15), params))) < 1e-13
+
+
 def test_janus_least_squares_is_eq5_and_error_velocity_vanishes_for_rigid_motion():
     a = np.deg2rad(30.0)
     B = np.asarray(janus.janus_beam_directions(a))
