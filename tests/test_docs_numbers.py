@@ -71,6 +71,7 @@ def test_readme_measured_table_reads_the_committed_runs():
     joint = next(r for r in day["rows"] if "diagnosis_s" in r)
     scale = {r["n_pings"]: r for r in _result("scale.json")["rows"]}
     big, ten_k = scale[max(scale)], scale[min(scale, key=lambda n: abs(n - 10_000))]
+    correction = {r["scenario"]: r for r in _result("correction_quick.json")["rows"] if r["n_pings"] == 100_000}
     nav = _result("navigation.json")
     rp = {r["navigation"]: r for r in nav["files"] if r["file"] == "RiverPro_test01.PD0"}
     survey = {r["navigation"]: r for r in nav["survey"]}
@@ -84,7 +85,9 @@ def test_readme_measured_table_reads_the_committed_runs():
                    f"RiverPro); a two-run survey of winriver02 {survey['random_walk']['misalignment_se_deg']:.2f} vs "
                    f"{survey['knots']['misalignment_se_deg']:.2f} deg",
                    f"| {big['calibration_s']:.1f} s (10^4: {ten_k['calibration_s']:.1f} s;",
-                   f"peak {big['peak_rss_mb'] / 1000:.2f} GB with the simulation"):
+                   f"peak {big['peak_rss_mb'] / 1000:.2f} GB with the simulation",
+                   f"rootfinder {correction['pool_m1']['rootfinder_over_asc']:.2f} x ASC's pings per second on pool_m1, "
+                   f"{correction['deep_ocean']['rootfinder_over_asc']:.2f} x in 300 m of water"):
         assert figure in readme
 
 
@@ -123,3 +126,13 @@ def test_real_table_reads_what_real_data_sh_wrote(tmp_path):
                        "ASC 0.211 m/s / 17.3 deg; refused: adc | none, 0.147 (z = 5.1), reference_north; 8.1 |")
     assert rows[3].startswith("| B | exit 0 |") and "exit 2 (one line: adcpdyn diagnose: error: B: /attitude: never changes)" in rows[3]
     assert rows[-1].endswith("A +0.003 +- 0.011 m.")
+
+
+@pytest.mark.parametrize("result, module, printer", [("correction_quick.json", "suites", "print_correction"),
+                                                     ("scale.json", "scale", "print_scale")])
+def test_benchmark_pages_hold_the_committed_runs(result, module, printer):
+    """docs/benchmarks.md's correction and full scale tables are their printers' output of the committed JSON."""
+    import importlib
+
+    out = _printed(getattr(importlib.import_module(f"adcpdyn.benchmarks.{module}"), printer), _result(result))
+    assert _missing(out.split("\nwrote")[0], "docs/benchmarks.md") == []
