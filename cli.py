@@ -412,10 +412,18 @@ def _print_calibration(result, title: str) -> None:
         cells = "  ".join(f"{v:+.4f} +- {s:.4f}" if np.isfinite(s) else "  (not determined)  "
                           for v, s in zip(result.lever_arms_sensor_m[i], result.lever_arms_sensor_se_m[i]))
         print(f"  r{i + 1}: {cells}")
+    if_moves = {c["pair"][0]: c for c in result.confounded if "se_if_bed_moves_rad" in c}
+
+    def bed_fixed(name: str) -> str:  # the moving-bed test could not decide: the pair's other reading, in the headline
+        c = if_moves.get(name)
+        return "" if c is None else (f" with the bed fixed [moving-bed test undetermined; with the bed free "
+                                     f"{deg(c['value_if_bed_moves_rad']):+.4f} +- {deg(c['se_if_bed_moves_rad']):.4f}]")
+
     if np.isfinite(result.heading_misalignment_se_rad):
         print(f"heading misalignment against the reference (deg): {deg(result.heading_misalignment_rad):+.4f} "
-              f"+- {deg(result.heading_misalignment_se_rad):.4f} (true heading = sensor heading + misalignment; head "
-              f"sensor: written as the installation yaw, installation pitch and roll not determined)")
+              f"+- {deg(result.heading_misalignment_se_rad):.4f}{bed_fixed('heading_misalignment')} (true heading = "
+              f"sensor heading + misalignment; head sensor: written as the installation yaw, installation pitch and roll "
+              f"not determined)")
     if result.compass_deviation_rad is not None:
         b, c = deg(result.compass_deviation_rad)
         sb, sc = deg(result.compass_deviation_se_rad)
@@ -426,7 +434,9 @@ def _print_calibration(result, title: str) -> None:
               + ("" if err is None else f"; compass error = misalignment - declination: {deg(err):+.2f} deg"))
     if result.installation_determined:
         print("installation yaw/pitch/roll (deg): " + ", ".join(
-            f"{deg(v):+.4f} +- {deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad)))
+            f"{deg(v):+.4f} +- {deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad))
+            + bed_fixed("installation_yaw").replace(" with the bed fixed [", " (yaw with the bed fixed [", 1)
+            + (")" if "installation_yaw" in if_moves else ""))
     if result.moving_bed != "off":
         fmt = lambda v, s: ("not determined" if v is None or not np.all(np.isfinite(s)) else
                             f"north {v[0]:+.4f} +- {s[0]:.4f}, east {v[1]:+.4f} +- {s[1]:.4f}")

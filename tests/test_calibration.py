@@ -121,7 +121,7 @@ def test_vessel_frame_installation_yaw_against_reference(lake_case):
     assert r.installation_ypr_se_rad[0] < np.deg2rad(0.1)
 
 
-def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_case):
+def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_case, capsys):
     """With the bed a parameter (``constant``), one straight run cannot tell a bed moving under the
     bottom track from a yaw error: the report names the pair in words, the yaw's standard error
     grows to cover it (several times the fixed-bed one), and the estimates stay within their
@@ -139,7 +139,14 @@ def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_cas
     [assumed] = auto.confounded
     assert assumed["pair"] == ["installation_yaw", "moving_bed_velocity"] and assumed["assumed"].startswith("bed fixed")
     assert assumed["se_if_bed_moves_rad"] == pytest.approx(free.installation_ypr_se_rad[0], rel=1e-6)
+    assert assumed["value_if_bed_moves_rad"] == pytest.approx(free.installation_ypr_rad[0], abs=1e-3 * assumed["se_if_bed_moves_rad"])
     assert "if the bed moves, the installation yaw is known only to" in " ".join(auto.warnings)
+    from adcpdyn.cli import _print_calibration  # the headline carries both readings, not a warning alone
+
+    _print_calibration(auto, "lake")
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("installation yaw/pitch/roll"))
+    assert (f"(yaw with the bed fixed [moving-bed test undetermined; with the bed free "
+            f"{np.rad2deg(free.installation_ypr_rad[0]):+.4f}") in line
     assert free.moving_bed == "constant" and free.moving_bed_test is None
     assert [c["pair"] for c in free.confounded] == [["installation_yaw", "moving_bed_velocity"]]
     assert "moving bed vs installation yaw" in " ".join(free.warnings)

@@ -854,12 +854,16 @@ def assumed_fixed_bed(free: CalibrationResult) -> list:
     for c in free.confounded:
         if "moving_bed_velocity" not in c.get("pair", []):
             continue
-        se = free.heading_misalignment_se_rad if c["pair"][0] == "heading_misalignment" else free.installation_ypr_se_rad[0]
+        heading = c["pair"][0] == "heading_misalignment"
+        value = free.heading_misalignment_rad if heading else free.installation_ypr_rad[0]
+        se = free.heading_misalignment_se_rad if heading else free.installation_ypr_se_rad[0]
         name = c["pair"][0].replace("_", " ")
         out.append({**c, "assumed": "bed fixed (the moving-bed test could not decide)", "se_if_bed_moves_rad": float(se),
+                    "value_if_bed_moves_rad": float(value),
                     "statement": (f"{name} solved with the bed fixed: the moving-bed test could not tell a moving bed from "
                                   f"a heading error on these courses; if the bed moves, the {name} is known only to +- "
-                                  f"{np.rad2deg(se):.2f} deg (its SE with the bed free), not to its reported SE")})
+                                  f"{np.rad2deg(se):.2f} deg (its SE with the bed free, where it is {np.rad2deg(value):+.2f} "
+                                  "deg), not to its reported SE")})
     return out
 
 
