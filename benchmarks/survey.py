@@ -9,7 +9,8 @@ Three parts, each from the same code path as ``calibrate --joint``:
 * accuracy: surveys drawn by seed (2-6 transects, compass error 8-25 deg with +-1 deg
   deviation, bed 0.1-0.35 m/s): the joint misalignment against the runs' mean effective
   heading correction, every run's bed velocity, and each single transect calibrated alone
-  (within 3 SE of the truth, or reported undetermined);
+  (within 3 SE of the truth, or reported undetermined: with the bed undetermined, the reading with
+  the bed free printed beside the headline within 3 of its SE);
 * coverage: two-transect surveys with AR(1) bottom-track and GNSS noise (lag-1 0.7 and 0.5)
   and the scenario's drawn compass deviation: the share of seeds whose misalignment and bed
   errors are within 3 standard errors, for the reported SEs (Newey-West, compass-deviation
@@ -80,7 +81,12 @@ def _scores(r, truth: dict, run_index=None) -> dict:
         bed_se.append(np.asarray(s).tolist() if s is not None else [np.inf, np.inf])
     infl = r.standard_errors.get("inflation_over_white", {})
     bed_white = [[s / infl.get(f"moving_bed_{a}", 1.0) for s, a in zip(se, ("north", "east"))] for se in bed_se]
+    free = next((c for c in r.confounded if c["pair"][0] == "heading_misalignment" and "value_if_bed_moves_rad" in c), None)
+    if_moves = None if free is None else {  # the bed undetermined: the headline's other reading, with the bed free
+        "error_deg": float(np.rad2deg(np.angle(np.exp(1j * (free["value_if_bed_moves_rad"] - true_d))))),
+        "se_deg": float(np.rad2deg(free["se_if_bed_moves_rad"]))}
     return {"misalignment_error_deg": d_err, "misalignment_se_deg": d_se, "misalignment_white_se_deg": white,
+            "misalignment_if_bed_moves": if_moves,
             "bed_error_m_s": bed_err, "bed_se_m_s": bed_se, "bed_white_se_m_s": bed_white,
             "confounded": [c["pair"] for c in r.confounded], "success": r.success, "status": r.multistart.status}
 
@@ -206,11 +212,16 @@ def print_survey(res: dict) -> None:
 
     print(f"\naccuracy: {len(res['accuracy'])} drawn surveys (joint; first two transects alone)")
     print(f"{'seed':>5}{'runs':>5}{'A deg':>7}{'bed m/s':>8}{'joint err deg':>14}{'se':>7}{'max bed err':>12}{'time s':>8}"
-          f"   single transects: err deg (se) [confounded]")
+          f"   single transects: err deg (se) [confounded; bed undetermined: with the bed free]")
+
+    def single(s: dict) -> str:
+        free = s.get("misalignment_if_bed_moves")
+        return (f"{s['misalignment_error_deg']:+.2f} ({s['misalignment_se_deg']:.2f})"
+                + (f" [free {free['error_deg']:+.2f} ({free['se_deg']:.2f})]" if free else " [named]" if s["confounded"] else ""))
+
     for a in res["accuracy"]:
         j = a["joint"]
-        singles = "; ".join(f"{s['misalignment_error_deg']:+.2f} ({s['misalignment_se_deg']:.2f})"
-                            + (" [named]" if s["confounded"] else "") for s in a["singles"])
+        singles = "; ".join(single(s) for s in a["singles"])
         print(f"{a['survey_seed']:>5}{a['runs']:>5}{a['compass_A_deg']:>+7.1f}{a['bed_speed_m_s']:>8.3f}"
               f"{j['misalignment_error_deg']:>+14.3f}{j['misalignment_se_deg']:>7.3f}{np.nanmax(np.abs(j['bed_error_m_s'])):>12.4f}"
               f"{a['time_s']:>8.1f}   {singles}")
@@ -240,11 +251,14 @@ def print_survey(res: dict) -> None:
         ok_bed = [np.nanmax(np.abs(a["joint"]["bed_error_m_s"])) <= 0.05 for a in acc]
         singles = [s for a in acc for s in a["singles"]]
         ok_single = [_within(s["misalignment_error_deg"], s["misalignment_se_deg"]) or not np.isfinite(s["misalignment_se_deg"])
+                     or (s.get("misalignment_if_bed_moves") is not None
+                         and _within(s["misalignment_if_bed_moves"]["error_deg"], s["misalignment_if_bed_moves"]["se_deg"]))
                      for s in singles]
         targets += [Target("joint misalignment within 1 deg and 3 SE of the effective compass error (share of surveys)",
                            float(np.mean(ok_d)), all(ok_d)),
                     Target("every run's bed velocity within 0.05 m/s (share of surveys)", float(np.mean(ok_bed)), all(ok_bed)),
-                    Target("single transects within 3 SE or reported undetermined (share)", float(np.mean(ok_single)),
+                    Target("single transects within 3 SE, or reported undetermined (bed undetermined: within 3 SE of "
+                           "the reading with the bed free, printed beside) (share)", float(np.mean(ok_single)),
                            all(ok_single))]
     targets.append(Target("coverage under AR(1) noise: |error| <= 3 SE in >= 95 % of seeds", hac, hac >= 0.95))
     for K, h in heading.items():
