@@ -120,3 +120,27 @@ def test_a_compiler_refusing_native_code_builds_portable_libraries(cache, tmp_pa
     x, p = np.array([0.3, -1.2, 2.0]), np.array([0.5, -2.0])
     assert np.allclose(np.asarray(f(x, p)[0]).ravel(), np.sin(x) * np.exp(0.5), rtol=1e-15, atol=0)
     assert [e.name for e in compiled.entries()] == [compiled.library_path(_model())[0].name]
+
+
+def test_compiled_diagnosis_model_equals_the_interpreted_one(cache, monkeypatch):
+    """A diagnosis's gap model (base and a catalog effect) with its per-ping models compiled, as
+    diagnose builds it, and interpreted: residuals and Jacobian at the same point."""
+    from adcpdyn.estimators.diagnosis import model as gap
+    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, base_from
+    from adcpdyn.models.effects import get_effect
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=3)
+    config = DiagnosisConfig(navigation="random_walk")
+    base = base_from([case], config)
+    out = {}
+    for threshold in (0, None):
+        monkeypatch.setattr(gap, "GAP_COMPILE_MIN_PINGS", threshold)
+        m = gap.GapModel(base, [get_effect("moving_bed")], solver=config.solver)
+        assert m.model.compiled == (threshold is not None)
+        z = m.start({}) / m.scale + 0.01
+        e, _, J = m.residual_fun(z, m.weights(base.sigma0))
+        out[threshold] = (np.asarray(e).ravel(), np.asarray(ca.densify(J)))
+    assert compiled.entries(), "the compiled gap model built no library"
+    for a, b in zip(out[0], out[None]):
+        assert np.max(np.abs(a - b)) <= 1e-12 * max(np.max(np.abs(b)), 1.0)
