@@ -419,6 +419,8 @@ def _print_calibration(result, title: str) -> None:
         return "" if c is None else (f" with the bed fixed [moving-bed test undetermined; with the bed free "
                                      f"{deg(c['value_if_bed_moves_rad']):+.4f} +- {deg(c['se_if_bed_moves_rad']):.4f}]")
 
+    yaw = bed_fixed("installation_yaw")
+
     if np.isfinite(result.heading_misalignment_se_rad):
         print(f"heading misalignment against the reference (deg): {deg(result.heading_misalignment_rad):+.4f} "
               f"+- {deg(result.heading_misalignment_se_rad):.4f}{bed_fixed('heading_misalignment')} (true heading = "
@@ -435,8 +437,7 @@ def _print_calibration(result, title: str) -> None:
     if result.installation_determined:
         print("installation yaw/pitch/roll (deg): " + ", ".join(
             f"{deg(v):+.4f} +- {deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad))
-            + bed_fixed("installation_yaw").replace(" with the bed fixed [", " (yaw with the bed fixed [", 1)
-            + (")" if "installation_yaw" in if_moves else ""))
+            + (f" (yaw{yaw})" if yaw else ""))
     if result.moving_bed != "off":
         fmt = lambda v, s: ("not determined" if v is None or not np.all(np.isfinite(s)) else
                             f"north {v[0]:+.4f} +- {s[0]:.4f}, east {v[1]:+.4f} +- {s[1]:.4f}")

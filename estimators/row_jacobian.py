@@ -145,12 +145,15 @@ class RowJacobian:
             list(self._pool.map(lambda part: part[1](), parts))
         return out
 
+    def _has_knots(self, index: int) -> bool:
+        return self.blocks[index].velocity_basis is not None and self._knots[index] is not None
+
     def _knot_index(self, index: int):
         """Block ``index``'s knot entries: (rows within the block, columns of z, the velocity basis
         as COO), output by output and axis by axis; None without knots."""
-        b, knots = self.blocks[index], self._knots[index]
-        if b.velocity_basis is None or knots is None:
+        if not self._has_knots(index):
             return None
+        b, knots = self.blocks[index], self._knots[index]
         k, n = b.fun.size1_out(0), b.data.shape[1]
         H = b.velocity_basis.tocoo()
         rows = np.concatenate([i * n + H.row for i in range(k) for _ in range(3)])
@@ -292,7 +295,7 @@ class RowJacobian:
         s, ds_dz = self._shared_at(z)
         knotted = []
         for index, b in enumerate(self.blocks):
-            if self._knot_index(index) is not None:
+            if self._has_knots(index):  # the J path below, which builds the knot entries once
                 knotted.append(index)
                 continue
             k, n = b.fun.size1_out(0), b.data.shape[1]

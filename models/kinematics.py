@@ -41,9 +41,7 @@ def tangential_velocity_earth(Lam, omega, r):
     Eq. 32): the cross product costs half of dLambda/dt's nine entries, and Lambda r_i is the
     transducers' position anyway."""
     rot = ca.mtimes(r, Lam.T)
-    w = ca.repmat(ca.reshape(omega, 1, 3), rot.shape[0], 1)
-    return ca.horzcat(w[:, 1] * rot[:, 2] - w[:, 2] * rot[:, 1], w[:, 2] * rot[:, 0] - w[:, 0] * rot[:, 2],
-                      w[:, 0] * rot[:, 1] - w[:, 1] * rot[:, 0])
+    return ca.cross(ca.repmat(ca.reshape(omega, 1, 3), rot.shape[0], 1), rot, 2)
 
 
 def tangential_velocity_paper_literal(Omega, r):

@@ -63,7 +63,7 @@ def _euler_matrix(cy, sy, cp, sp, cr, sr):
 def euler_matrix_and_rate(ypr, ypr_rate):
     """Lambda = Rz Ry Rx (:func:`euler_matrix`) and its time derivative dLambda/dt = Lambda
     skew(w_b) for Euler angles changing at ``ypr_rate`` (rad/s), with w_b the body-frame angular
-    velocity (:func:`body_rates`). The identity is exact (Lambda orthonormal), and costs a third
+    velocity (rad/s, x bow, y starboard, z down). The identity is exact (Lambda orthonormal), and costs a third
     of differentiating Lambda's nine products (the per-ping models evaluate it nine times a
     ping); one set of sines and cosines serves both. Returns (Lambda, dLambda_dt, w_b)."""
     cy, sy = ca.cos(ypr[0]), ca.sin(ypr[0])
@@ -72,12 +72,6 @@ def euler_matrix_and_rate(ypr, ypr_rate):
     Lam = _euler_matrix(cy, sy, cp, sp, cr, sr)
     w_b = _body_rates(cp, sp, cr, sr, ypr_rate)
     return Lam, ca.mtimes(Lam, skew(w_b)), w_b
-
-
-def body_rates(ypr, ypr_rate):
-    """Body-frame angular velocity (rad/s, x bow, y starboard, z down) of Euler angles (yaw,
-    pitch, roll) changing at ``ypr_rate``: skew(w_b) = Lambda^T dLambda/dt for Lambda = Rz Ry Rx."""
-    return _body_rates(ca.cos(ypr[1]), ca.sin(ypr[1]), ca.cos(ypr[2]), ca.sin(ypr[2]), ypr_rate)
 
 
 def _body_rates(cp, sp, cr, sr, rate):

@@ -319,7 +319,29 @@ class CalibrationRecord:
         and lever arms the method needs (``dynamic``: the dynamic methods' lever arms and beam
         rotation; else the static correction's installation angles, for a vessel-frame sensor),
         each refused in one line here when the file does not determine it."""
-        return _applied_to(self, case_name, sensor_frame, dynamic)
+        head = sensor_frame == "transducer"
+        static, determined = (self.installation_or_nominal() if not head and not dynamic else (None, False))
+        if dynamic:
+            lever = self.lever_arms_in("transducer" if head else "vessel")
+            beams = np.zeros(3) if head else self.installation()
+        else:
+            lever, beams = None, None
+        delta = self.heading_misalignment_rad if head else None
+        note = ("true heading = recorded heading + heading misalignment (+ compass deviation): the misalignment holds the "
+                "magnetic declination, not applied separately" if delta is not None else
+                "headings as recorded (vessel-frame attitude: installation angles instead)" if not head else
+                "headings as recorded (the calibration has no heading misalignment)")
+        own = self.run_for(case_name)
+        bed, source = self.moving_bed_for(case_name)
+        return AppliedCalibration(
+            lever_arms_sensor_m=lever, beam_installation_ypr_rad=beams,
+            static_installation_ypr_rad=static, static_installation_determined=determined, heading_misalignment_rad=delta,
+            heading_note=note, compass_deviation=self.compass_deviation_applied(),
+            compass_deviation_found=self.compass_deviation_rad is not None,
+            magnetic_declination_rad=self.magnetic_declination_rad, compass_error_rad=self.compass_error_rad,
+            nominal_installation_ypr_rad=self.nominal_installation_ypr_rad, attitude_source=self.attitude_source,
+            transducer_depth_offset_m=None if own is None else own.transducer_depth_offset_m, moving_bed_m_s=bed,
+            moving_bed_source=source)
 
     def compass_deviation_applied(self) -> tuple[float, float, float, float]:
         """(B, C, mean_sin, mean_cos) of the one-cycle compass deviation a head sensor's headings are
@@ -337,10 +359,6 @@ class AppliedCalibration:
 
     Attributes
     ----------
-    run : str
-        The case name the values were resolved for.
-    sensor_frame : str
-        The run's attitude frame: ``vessel`` or ``transducer`` (sensor in the head).
     lever_arms_sensor_m : ndarray (4, 3) or None
         Lever arms in the sensor's frame (dynamic methods; None for the static correction).
     beam_installation_ypr_rad : ndarray (3,) or None
@@ -365,8 +383,6 @@ class AppliedCalibration:
         The bed under the run (:meth:`CalibrationRecord.moving_bed_for`) and ``moving_bed_source``.
     """
 
-    run: str
-    sensor_frame: str
     lever_arms_sensor_m: np.ndarray | None
     beam_installation_ypr_rad: np.ndarray | None
     static_installation_ypr_rad: np.ndarray | None
@@ -382,32 +398,6 @@ class AppliedCalibration:
     transducer_depth_offset_m: float | None
     moving_bed_m_s: np.ndarray | None
     moving_bed_source: str
-
-
-def _applied_to(record: CalibrationRecord, case_name: str, sensor_frame: str, dynamic: bool) -> AppliedCalibration:
-    head = sensor_frame == "transducer"
-    static, determined = (record.installation_or_nominal() if not head and not dynamic else (None, False))
-    if dynamic:
-        lever = record.lever_arms_in("transducer" if head else "vessel")
-        beams = np.zeros(3) if head else record.installation()
-    else:
-        lever, beams = None, None
-    delta = record.heading_misalignment_rad if head else None
-    note = ("true heading = recorded heading + heading misalignment (+ compass deviation): the misalignment holds the "
-            "magnetic declination, not applied separately" if delta is not None else
-            "headings as recorded (vessel-frame attitude: installation angles instead)" if not head else
-            "headings as recorded (the calibration has no heading misalignment)")
-    own = record.run_for(case_name)
-    bed, source = record.moving_bed_for(case_name)
-    return AppliedCalibration(
-        run=case_name, sensor_frame=sensor_frame, lever_arms_sensor_m=lever, beam_installation_ypr_rad=beams,
-        static_installation_ypr_rad=static, static_installation_determined=determined, heading_misalignment_rad=delta,
-        heading_note=note, compass_deviation=record.compass_deviation_applied(),
-        compass_deviation_found=record.compass_deviation_rad is not None,
-        magnetic_declination_rad=record.magnetic_declination_rad, compass_error_rad=record.compass_error_rad,
-        nominal_installation_ypr_rad=record.nominal_installation_ypr_rad, attitude_source=record.attitude_source,
-        transducer_depth_offset_m=None if own is None else own.transducer_depth_offset_m, moving_bed_m_s=bed,
-        moving_bed_source=source)
 
 
 def as_record(calibration) -> CalibrationRecord | None:

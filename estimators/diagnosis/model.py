@@ -34,7 +34,6 @@ from ..statistics.normal_equations import as_sparse, log_det_normal
 GAP_COMPILE_MIN_PINGS = 0
 
 
-
 def group_of(channel: str) -> str:
     return channel.split("/")[-1].split("_")[0]
 
