@@ -796,16 +796,20 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
 
         def one(name, terms=tuple(selected_terms), start=current[1]):
             model, f = refit(list(terms), name, start)
+            held_out = _cv_residuals(model, f, config.cv_folds, config.cv_block_s)
             if progress:
                 progress(labels[name])
-            return model, f
+            return model, f, held_out
 
-        # the candidates' refits are independent: threads (CasADi computes without the GIL)
+        # the candidates' refits are independent: threads (CasADi computes without the GIL); the reference delay's
+        # profile (a dozen refits) first, so the pool packs the single refits around it instead of after it
         with ThreadPoolExecutor(max_workers=max(1, min(config.workers, len(todo)))) as pool:
-            done = list(pool.map(one, todo))
-        for name, (model, f) in zip(todo, done):
+            futures = {name: pool.submit(one, name) for name in sorted(todo, key=lambda n: n != "reference_latency")}
+            done = [futures[name].result() for name in todo]
+        for name, (model, f, held_out) in zip(todo, done):
             tried[name] = (labels[name], model, f)
             fits[labels[name]] = (model, f)
+            cv[labels[name]] = held_out
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
             for model, f in [v[1:] for v in tried.values()] + [fits[start_name]]:
                 levels = variance_components(model, f) if model.random_walk else _group_sigma(model, f.raw)
@@ -813,13 +817,9 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                     if key[1] not in PRIOR_GROUPS:  # the walk's intensity is the base's, not a floor
                         noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
             noise = {k: max(v, 1e-9) for k, v in noise.items()}
-            cv["base"] = _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)
-            if current_name != "base":
-                cv[current_name] = _cv_residuals(*current, config.cv_folds, config.cv_block_s)
         ref_gap, _ = _gap(current[0], cv[current_name], noise)
         scores = []
         for name, (label, model, f) in tried.items():
-            cv[label] = _cv_residuals(model, f, config.cv_folds, config.cv_block_s)
             s = _score(name, model, f, current[0], current[1], ref_gap, cv[label], cv[current_name], noise, n_obs,
                        config, round_)
             mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
