@@ -106,7 +106,9 @@ def markdown_table(res: dict) -> str:
         for f, n in cols:
             r = cell.get((f, n, error, size))
             text = "" if r is None else r["verdict"]
-            if r is not None and not r["hit"] and r.get("outcome", "").startswith("under the file's detection limit"):
+            if r is not None and not r["hit"] and r.get("detection_limit_reason"):
+                text += " (under the file's limit: read against its own delay peak)"
+            elif r is not None and not r["hit"] and r.get("outcome", "").startswith("under the file's detection limit"):
                 text += (f" (under the file's limit{', over' if r.get('detection_limit_beyond') else ''} "
                          f"{r['detection_limit']:.2g}{' ' + r['unit'] if r['unit'] else ''})")
             elif r is not None and not r["hit"] and r.get("outcome", "").startswith(("below", "not tried", "outscored", "no gap")):
@@ -116,6 +118,46 @@ def markdown_table(res: dict) -> str:
             row.append(f"**{text}**" if r is not None and r["hit"] and error != "clean" else text)
         lines.append(f"| {error} {size:g} | " + " | ".join(row) + " |")
     return "\n".join(lines)
+
+
+def limits_paragraph(res: dict, navigation: str = "random_walk") -> str:
+    """docs/diagnosis.md's paragraph of the clean files' detection limits and of the misses, from the rows
+    as measured: per error each file's limit (the own effect whose shift carries it, 'over' where not even
+    the largest size searched shows, or read against the file's own delay peak), then the misses under
+    and above their file's limit."""
+    rows = [r for r in res["rows"] if r["navigation"] == navigation]
+    files = list(dict.fromkeys(r["file"] for r in rows))
+    clean = {r["file"]: r for r in rows if r["error"] == "clean"}
+    injected = [r for r in rows if r["error"] != "clean"]
+    parts = []
+    for error in dict.fromkeys(r["error"] for r in injected):
+        cells = []
+        for f in files:
+            mine = [r for r in injected if r["file"] == f and r["error"] == error]
+            limit = clean.get(f, {}).get("detection_limits", {}).get(error)
+            if limit is None or not mine:
+                cells.append("-")
+                continue
+            r = mine[0]
+            cell = f"{'over ' if r.get('detection_limit_beyond') else ''}{limit:.3g}"
+            if r.get("carrier"):
+                cell += f" (own {r['carrier']}'s shift)"
+            elif r.get("detection_limit_reason"):
+                peak = clean[f].get("attitude_delay_profile", {}).get("peak_s")
+                cell += f" (own delay peak at {peak:+.2f} s)" if peak is not None else " (own delay peak)"
+            cells.append(cell)
+        unit = injected[[r["error"] for r in injected].index(error)]["unit"]
+        parts.append(f"{error} {', '.join(cells)}{' ' + unit if unit else ''}")
+    missed = [r for r in injected if not r["hit"]]
+    under = [r for r in missed if r.get("detection_limit") is not None and r["size"] < r["detection_limit"]]
+    above = [r for r in missed if r not in under]
+
+    def listed(rs):
+        return "; ".join(f"{r['file'].split('.')[0]} {r['error']} {r['size']:g}" for r in rs) or "none"
+
+    return (f"Limits of the clean files ({', '.join(f.split('.')[0] for f in files)}; the error's unit): "
+            + "; ".join(parts) + f". Of the {len(missed)} misses, {len(under)} are under their file's limit ("
+            + listed(under) + f"); above it: {listed(above)}.")
 
 
 def print_diagnosis(res: dict) -> None:
@@ -135,6 +177,8 @@ def print_diagnosis(res: dict) -> None:
     for m in res["missing"]:
         print(f"  missing: {m}")
     print("\n" + markdown_table(res) + "\n")
+    if "random_walk" in res["summary"]:
+        print(limits_paragraph(res) + "\n")
     best = max((s["top1"] or 0) for s in res["summary"].values()) if res["summary"] else 0
     alarms = sum(s["false_alarms"] for s in res["summary"].values())
     short = [r["seconds"] for r in res["rows"] if r["pings"] <= 300 and r["navigation"] == "random_walk"]

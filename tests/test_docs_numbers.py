@@ -41,6 +41,13 @@ def test_markdown_tables_of_the_benches_are_in_their_pages(result, module, page)
     assert _missing(render(_result(result)), page) == []
 
 
+def test_diagnosis_limits_paragraph_is_the_committed_run():
+    """docs/diagnosis.md's paragraph of the real files' detection limits and misses, printed by the bench."""
+    from adcpdyn.benchmarks.diagnosis_real import limits_paragraph
+
+    assert limits_paragraph(_result("diagnosis_random_walk.json")) in (ROOT / "docs" / "diagnosis.md").read_text()
+
+
 def test_survey_bench_table_is_the_committed_runs():
     from adcpdyn.benchmarks.survey import print_survey
 

@@ -405,6 +405,10 @@ def test_field_selftest_says_why_an_error_was_not_named():
     assert outcome({**row, "verdict": "none"}, {**mine, "significant": False}, flat).startswith("no gap to explain (held-out")
     assert outcome({**row, "hit": True, "verdict": "moving_bed"}, mine, result) == "named"
     assert outcome({"expected": "none", "verdict": "heave", "hit": False}, None, result) == "names heave"
+    own_peak = {**row, "verdict": "none", "expected": "attitude_latency", "size": 1.0, "unit": "s", "detection_limit": 2.0,
+                "detection_limit_beyond": True, "detection_limit_reason": "its own delay peak"}
+    assert outcome(own_peak, {**mine, "significant": False}, result).startswith(
+        "under the file's detection limit (1 s: its own delay peak; BIC")
 
 
 def test_an_error_nested_in_the_files_own_effect_is_judged_on_that_effect():

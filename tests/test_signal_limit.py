@@ -56,3 +56,24 @@ def test_signal_limit_sits_on_the_bar(fitted):
     for factor, passes in ((1.01, True), (0.95, False)):
         lam, inflation = signal_statistic(model, fit, case, "sound_speed_relative", factor * out["size"], config)
         assert (lam / inflation > bar) == passes
+
+
+
+def test_own_delay_profile_peaks_at_the_injected_latency():
+    """The clean file's own attitude-delay profile (each model exact at its delay: the samples taken
+    about t + d) peaks at zero on a clean simulated run, so no own delay is claimed there, and at s
+    once the samples' time stamps are s late."""
+    from adcpdyn.estimators.diagnosis.signal_limit import DELAY_STEP_S, own_delay_profile
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=40.0)), seed=3)
+    config = DiagnosisConfig(navigation="random_walk", attitude="samples")
+    s = 2 * DELAY_STEP_S
+    profiles = []
+    for run in (case, inject(case, "attitude_latency_s", s)):
+        _, model, fit, _ = fit_base([run], config)
+        profiles.append(own_delay_profile(model, fit, config))
+    clean, late = profiles
+    assert clean["peak_s"] == 0.0 and clean["rise"] <= clean["bar"]
+    assert late["peak_s"] == pytest.approx(s) and late["rise"] > late["bar"]
+    assert len(clean["delays"]) == len(clean["gain"]) and min(clean["delays"]) <= -2 * s

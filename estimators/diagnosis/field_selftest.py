@@ -17,7 +17,7 @@ from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, diagnose
 from ..measurement_model import has_moving_reference
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject, shift_signature
-from .signal_limit import signal_limit
+from .signal_limit import own_delay_profile, signal_limit
 
 
 def field_selftest(case: Case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
@@ -34,7 +34,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
     moving = has_moving_reference(case)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
-    rows, own, own_values, limits, beyond = [], (), {}, {}, {}
+    rows, own, own_values, limits, beyond, reasons = [], (), {}, {}, {}, {}
     for error, size in trials:
         run = case if error == "clean" else inject(case, error, size)
         tic = time.perf_counter()
@@ -53,6 +53,7 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
                "seconds": seconds, "statement": r.statement}
         row["detection_limit"] = limits.get(error)
         row["detection_limit_beyond"] = beyond.get(error, False)  # not even the largest size searched shows
+        row["detection_limit_reason"] = reasons.get(error)
         row["outcome"] = outcome(row, mine, r, config.min_gap)
         if error == "clean":
             row["verdict"] = "+".join(own) or "none"
@@ -72,7 +73,18 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
             for e, spec in FIELD_ERRORS.items():  # an error the file's own effects carry: what moving them takes
                 if (mover := carrier(spec[0], own)) and (limit := moved_limit(own_values[mover], shift_signature(case, e))):
                     limits[e], beyond[e] = limit, False
+            if any(e == "attitude_latency_s" for e, _ in trials) and not carrier("attitude_latency", own):
+                profile = own_delay_profile(*r.fits["base"], config)
+                if profile is not None:
+                    row["attitude_delay_profile"] = profile
+                    if profile["rise"] > profile["bar"]:  # read against the file's own peak: no size is told
+                        limits["attitude_latency_s"], beyond["attitude_latency_s"] = max(map(abs, profile["delays"])), True
+                        reasons["attitude_latency_s"] = (
+                            f"the clean file's own attitude-delay profile peaks at {profile['peak_s']:+.2f} s, "
+                            f"{profile['rise']:.0f} in log-likelihood over no delay (bar {profile['bar']:.0f}): a latency "
+                            "is read against that peak, not zero")
             row["detection_limits"] = limits
+            row["detection_limit_reasons"] = reasons
             row["own_effects"] = list(own)
         elif mover := carrier(expected, own):  # the file carries it already: named when its estimate moves its way
             row.update(_moved({k: v for k, v in r.given.items() if k.split("/")[-1].startswith(mover + ".")},
@@ -140,6 +152,8 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     limit = row.get("detection_limit")
     if not mine["significant"] and limit is not None and row["size"] < limit:
         unit = f" {row['unit']}" if row["unit"] else ""
+        if row.get("detection_limit_reason"):
+            return f"under the file's detection limit ({row['size']:g}{unit}: {row['detection_limit_reason']}; {detail})"
         if row.get("detection_limit_beyond"):
             return f"under the file's detection limit ({row['size']:g}{unit}: not even {limit:.3g}{unit} shows on this file; {detail})"
         return f"under the file's detection limit ({row['size']:g} < {limit:.3g}{unit}; {detail})"

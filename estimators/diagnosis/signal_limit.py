@@ -10,11 +10,14 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+import dataclasses
+from concurrent.futures import ThreadPoolExecutor
+
 from ...cases.case import Case
 from ...models.effects import get_effect
-from .diagnose import DiagnosisConfig, base_from, hac_of_columns
+from .diagnose import DiagnosisConfig, _pinned_effect_parameters, _terms, applicable, base_from, hac_of_columns
 from .field_errors import FIELD_ERRORS, inject
-from .model import Fit, GapModel, free_jacobian
+from .model import Fit, GapModel, free_jacobian, residual_peaks
 from ..statistics.normal_equations import as_sparse, inverse_columns
 
 SEARCH = (1.0 / 16.0, 4.0)  # sizes searched: from the smallest typical one over 16 to the largest times 4
@@ -77,3 +80,39 @@ def signal_limit(model: GapModel, fit: Fit, case: Case, error: str, config: Diag
             return None
         lo, hi = (lo, mid) if ok else (mid, hi)
     return {"size": float(hi), "beyond": False, "below": False}
+
+
+ATTITUDE_DELAY = "attitude_latency.delay_s"
+DELAY_STEP_S = 0.25  # the attitude-delay profile's grid: a fraction of any ping interval here (0.5-1.3 s)
+
+
+def own_delay_profile(model: GapModel, fit: Fit, config: DiagnosisConfig) -> dict | None:
+    """The clean file's own attitude-delay profile: the log-likelihood over the base's of an attitude
+    latency pinned on a grid over the effect's bounds, each model exact at its delay (the sensor's
+    samples taken about t + d, as the diagnosis re-centres them). An injected latency s only shifts
+    the time stamps, so the injected file's profile is this one moved by s (checked on RiverPro: to
+    within the grid's ripple): where this one rises above the one-unknown bar ((log n + margin) / 2)
+    away from zero, a latency is read against that peak, not zero, and no size of it is told on the
+    file. {"delays", "gain", "peak_s", "rise", "bar"}; None off the sensor's samples (a motion
+    model's attitude is not shifted) or where the effect does not apply."""
+    base = model.base
+    if not base.sampled or not applicable(base, "attitude_latency")[0]:
+        return None
+    terms, peaks = _terms(base, "attitude_latency"), residual_peaks(model, fit)
+    bound = next(p for p in get_effect("attitude_latency").parameters if p.name == "delay_s")
+    delays = np.round(np.arange(bound.lower, bound.upper + 1e-9, DELAY_STEP_S), 6)
+    base_ll = fit.log_likelihood(model)
+
+    def at(d: float) -> float:
+        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, sample_shift_s=float(d)) for r in base.runs])
+        m = GapModel(shifted, terms, peaks, solver=config.solver)
+        pinned = {**_pinned_effect_parameters(m, shifted), next(n for n in m.names if n.endswith(ATTITUDE_DELAY)): float(d)}
+        return float(m.solve(m.start(fit.values), fit.sigma, fixed=pinned).log_likelihood(m) - base_ll)
+
+    with ThreadPoolExecutor(max_workers=2) as pool:  # CasADi lets go of Python's lock
+        gain = np.array(list(pool.map(at, delays)))
+    best = int(np.argmax(gain))
+    zero = int(np.argmin(np.abs(delays)))
+    return {"delays": delays.tolist(), "gain": gain.tolist(), "peak_s": float(delays[best]),
+            "rise": float(gain[best] - gain[zero]),
+            "bar": float((np.log(int((model.mask > 0).sum())) + config.bic_margin) / 2)}
