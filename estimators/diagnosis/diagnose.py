@@ -989,6 +989,15 @@ def _fixed_points(base, terms, peaks, config, model, fit, pinned):
     return model, fit
 
 
+def fit_at_delay(base, terms, peaks, config, field: str, key: str, d: float, x: dict, sigma: dict):
+    """(model, fit) exact at delay ``d``: every run's ``field`` (``reference_shift_s``, ``sample_shift_s``)
+    set to it, the unknown ending in ``key`` pinned there, the fit started from ``x``."""
+    shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **{field: float(d)}) for r in base.runs])
+    model = GapModel(shifted, terms, peaks, solver=config.solver)
+    fixed = {**_pinned_effect_parameters(model, shifted), next(n for n in model.names if n.endswith(key)): float(d)}
+    return model, model.solve(model.start(x), sigma, fixed=fixed)
+
+
 REFERENCE_DELAY_SPAN_S = 3.0  # the reference delays a random-walk base's profile searches, +- (s)
 REFERENCE_DELAY = "reference_latency.delay_s"
 
@@ -1011,9 +1020,7 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
                 next(n for n in model.names if n.endswith(REFERENCE_DELAY)): d}
 
     def at(d: float, x: dict):
-        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, reference_shift_s=d) for r in base.runs])
-        model = GapModel(shifted, terms, peaks, solver=config.solver)
-        return model, model.solve(model.start(x), sigma, fixed=held(model, d))
+        return fit_at_delay(base, terms, peaks, config, "reference_shift_s", REFERENCE_DELAY, d, x, sigma)
 
     def settled(model: GapModel, fit: Fit, d: float):  # the attitude's delays, if any, to their fixed point
         return _fixed_points(model.base, terms, peaks, config, model, fit, held(model, d))

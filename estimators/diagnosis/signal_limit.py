@@ -10,12 +10,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-import dataclasses
 from concurrent.futures import ThreadPoolExecutor
 
 from ...cases.case import Case
 from ...models.effects import get_effect
-from .diagnose import DiagnosisConfig, _pinned_effect_parameters, _terms, applicable, base_from, hac_of_columns
+from .diagnose import DiagnosisConfig, _terms, applicable, base_from, fit_at_delay, hac_of_columns
 from .field_errors import FIELD_ERRORS, inject
 from .model import Fit, GapModel, free_jacobian, residual_peaks
 from ..statistics.normal_equations import as_sparse, inverse_columns
@@ -104,10 +103,8 @@ def own_delay_profile(model: GapModel, fit: Fit, config: DiagnosisConfig) -> dic
     base_ll = fit.log_likelihood(model)
 
     def at(d: float) -> float:
-        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, sample_shift_s=float(d)) for r in base.runs])
-        m = GapModel(shifted, terms, peaks, solver=config.solver)
-        pinned = {**_pinned_effect_parameters(m, shifted), next(n for n in m.names if n.endswith(ATTITUDE_DELAY)): float(d)}
-        return float(m.solve(m.start(fit.values), fit.sigma, fixed=pinned).log_likelihood(m) - base_ll)
+        m, f = fit_at_delay(base, terms, peaks, config, "sample_shift_s", ATTITUDE_DELAY, d, fit.values, fit.sigma)
+        return float(f.log_likelihood(m) - base_ll)
 
     with ThreadPoolExecutor(max_workers=2) as pool:  # CasADi lets go of Python's lock
         gain = np.array(list(pool.map(at, delays)))
