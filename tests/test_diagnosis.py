@@ -125,6 +125,17 @@ def test_diagnosis_names_the_injected_effect_and_its_value(latency_diagnosis):
     assert abs(top["shrink_fraction"] - oracle) <= 0.2 * abs(oracle)
 
 
+def test_compass_offset_beside_an_estimated_installation_is_named():
+    """A heading error turns the beams as an installation yaw does, but also the transducers'
+    tangential velocities, which the installation does not: beside an estimated installation it is
+    tried, and named rather than its three-unknown cousin, the compass deviation."""
+    case = simulate(with_effect(short_scenario(40.0), "compass_offset", {"A_rad": float(np.radians(4.0))}), seed=5)
+    case = dataclasses.replace(case, truth=dataclasses.replace(case.truth, effects=[]))
+    r = diagnose(case, DiagnosisConfig(effects=("compass_offset", "compass_deviation", "heave")))
+    assert "compass_offset" not in r.base["skipped_effects"]
+    assert r.verdict == "compass_offset"
+
+
 def test_effect_free_case_gets_none():
     case = simulate(short_scenario(), seed=7)
     r = diagnose(case, DiagnosisConfig(effects=FEW))
@@ -233,6 +244,23 @@ def test_moving_bed_is_named_on_a_run_known_to_stay_put():
     params = {"velocity_north_m_s": 0.08, "velocity_east_m_s": -0.2}
     row = run_one("moving_bed", params, 5, "pool", DiagnosisConfig(effects=("moving_bed", "heave", "sound_speed_error")))
     assert row["expected"] == "moving_bed" and row["verdict"] == "moving_bed"
+
+
+def test_surge_is_named_on_a_run_known_to_stay_put_and_left_to_the_base_under_way():
+    """A run held still (the pool) has no navigation to follow a surge: the catalog's surge (one
+    frequency, along and across the sensor's heading) is a candidate there and removes the gap, even
+    for a period longer than the record; on a run under way it is the base's (skipped, with why)."""
+    from adcpdyn.estimators.diagnosis.selftest import run_one
+
+    period, amplitude, phase = 32.0, 0.2, 0.7
+    params = {"omega_rad_s": 2 * np.pi / period, "cos_m_s": amplitude * np.sin(phase), "sin_m_s": amplitude * np.cos(phase),
+              "across_cos_m_s": 0.0, "across_sin_m_s": 0.0}
+    config = DiagnosisConfig(effects=("surge", "heave", "moving_bed"))
+    row = run_one("surge", params, 5, "pool", config, slow_attitude=True)
+    assert row["expected"] == "surge" and row["verdict"] == "surge"
+    assert row["shrink_reported"] > 0.9 and row["gap_after"] < 0.1 * row["gap_before"]
+    under_way = run_one("surge", params, 5, "launch_vessel", config)
+    assert under_way["expected"] == "none" and "part of the base" in under_way["absorbed_by_base"]
 
 
 def test_a_nearly_as_good_effect_is_named_beside_the_chosen_one(monkeypatch):

@@ -520,7 +520,7 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
         return False, "a moving bed is indistinguishable from vessel motion without a reference"
     if e.needs_reference and not moving and not (name == "moving_bed" and stationary):
         return False, "needs a moving reference velocity"
-    if name == "surge":
+    if name == "surge" and not stationary:  # a run held still (the pool) has no navigation to follow a surge
         return False, "part of the base: its navigation (piecewise-linear velocity through the reference or bottom track) follows speed changes"
     if name == "forced_roll":
         return False, ("part of the base: its motion model's modes may be steady (wave-forced), as the calibration's; an "
@@ -531,8 +531,6 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
         return False, ("not observable: a sensor inside the head turns with the head, so the beams' attitude does not "
                        "depend on how the head sits in the vessel (notes on the paper, erratum 5); its heading against "
                        "the reference is the base's heading misalignment")
-    if name == "compass_offset" and base.spec.installation == "estimate":
-        return False, "part of the base: a constant heading error turns the beams as the installation yaw it estimates"
     if name == "compass_offset" and base.spec.heading != "off" and "heading_misalignment" not in base.pins.values:
         return False, "part of the base: the heading misalignment it estimates against the reference is a constant heading error"
     if name == "deep_water_timing" and base.runs[0].timing != "shallow":

@@ -340,6 +340,10 @@ def residual_peaks(model: GapModel, fit: Fit) -> dict:
         out["tilt"] = periodogram_peak(run.case.attitude.time_s, tilt, lo, hi)
     bt = np.column_stack([fit.raw[sl[f"{prefix}bt_beam{i + 1}"]] for i in range(4)])
     out["bt_vertical"] = periodogram_peak(t_ping, bt.mean(axis=1), lo, hi)
+    if all(r.knots is None for r in model.base.runs):  # a run held still, where a surge is a candidate
+        # the beams' opposite pairs' differences: horizontal velocity, down to half a cycle over the record
+        horizontal = np.column_stack([bt[:, 0] - bt[:, 1], bt[:, 2] - bt[:, 3]])
+        out["bt_horizontal"] = periodogram_peak(t_ping, horizontal, np.pi / duration, hi)
     return out
 
 

@@ -1,46 +1,68 @@
-"""The navigation speed varies within the run: speed along the heading s(t).
+"""The vessel surges: a horizontal velocity oscillating at one frequency, C cos w t + S sin w t
+along the heading and C' cos w t + S' sin w t across it (to port: the heading the beams' sensor
+reads may sit off the bow by the installation, so the direction is the data's, not assumed).
 
-Injected as a sinusoidal speed change; modelled as a cubic B-spline speed with
-``N_COEFFICIENTS`` coefficients spanning the run (about 3.2 s between knots on a
-two-minute run; a surge the base's constant speed cannot follow).
+Modelled only where the base has no navigation to follow it (a run held still, the pool: a
+moored boat surging on a seiche or on its lines); on a run under way the base's velocity
+through the reference or bottom track follows speed changes (``diagnose.applicable``). The
+frequency is seeded by the strongest peak of the base's horizontal bottom-track residuals.
 """
 
 from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import BSpline
 
 from .base import Effect, Parameter
-
-N_COEFFICIENTS = 40
 
 
 class Surge(Effect):
     name = "surge"
-    description = "speed along the heading varying within the run"
-    parameters = tuple(Parameter(f"speed_spline{k}_m_s", 0.05, -5.0, 5.0) for k in range(N_COEFFICIENTS))
+    description = "horizontal velocity oscillating at omega_rad_s, along and across the heading"
+    parameters = (
+        Parameter("omega_rad_s", 0.05, 0.02, 3.0, signed=False),
+        Parameter("cos_m_s", 0.05, -5.0, 5.0),
+        Parameter("sin_m_s", 0.05, -5.0, 5.0),
+        Parameter("across_cos_m_s", 0.05, -5.0, 5.0),
+        Parameter("across_sin_m_s", 0.05, -5.0, 5.0),
+    )
 
     def draw(self, rng):
-        return {"amplitude_m_s": float(rng.uniform(0.12, 0.3)), "period_s": float(rng.uniform(15.0, 40.0)),
-                "phase_rad": float(rng.uniform(0, 2 * np.pi))}
+        """A 0.12-0.3 m/s surge along the heading, period 15-40 s, random phase, in the model's parameters."""
+        amplitude, period, phase = rng.uniform(0.12, 0.3), rng.uniform(15.0, 40.0), rng.uniform(0, 2 * np.pi)
+        return {"omega_rad_s": float(2 * np.pi / period), "cos_m_s": float(amplitude * np.sin(phase)),
+                "sin_m_s": float(amplitude * np.cos(phase)), "across_cos_m_s": 0.0, "across_sin_m_s": 0.0}
 
     def vessel_velocity_offset(self, t, heading, params):
-        s = params["amplitude_m_s"] * np.sin(2 * np.pi * np.asarray(t) / params["period_s"] + params["phase_rad"])
-        return np.column_stack([s * np.cos(heading), s * np.sin(heading), np.zeros_like(s)])
+        w, tau = params["omega_rad_s"], np.asarray(t, dtype=float)
+        c, s = np.cos(w * tau), np.sin(w * tau)
+        along = params["cos_m_s"] * c + params["sin_m_s"] * s
+        across = params.get("across_cos_m_s", 0.0) * c + params.get("across_sin_m_s", 0.0) * s
+        return np.column_stack([along * np.cos(heading) - across * np.sin(heading),
+                                along * np.sin(heading) + across * np.cos(heading), np.zeros_like(along)])
+
+    def truth_values(self, params):
+        """None: the simulator surges along the vessel's heading, the model's axes are the sensor's."""
+        return None
+
+    def extra_starts(self):
+        """Slow surges (periods of 15-60 s: a boat on its lines, a seiche) whose residual peak a short
+        record or a faster oscillation hides."""
+        return [{"surge.omega_rad_s": w} for w in (0.1, 0.2, 0.4)]
+
+    def initial(self, ctx):
+        return np.array([ctx.residual_peak("bt_horizontal"), 0.0, 0.0, 0.0, 0.0])
 
     @staticmethod
-    def _basis(times, ctx):
-        k = 3
-        inner = np.linspace(ctx.t0_s, ctx.t1_s, N_COEFFICIENTS - k + 1)
-        knots = np.concatenate([[ctx.t0_s] * k, inner, [ctx.t1_s] * k])
-        x = np.clip(np.asarray(times, dtype=float), ctx.t0_s, ctx.t1_s)
-        return ca.DM(BSpline.design_matrix(x, knots, k).toarray())
+    def _offset(t, heading_dir, th):
+        tau = ca.DM(t)
+        c, s = ca.cos(th[0] * tau), ca.sin(th[0] * tau)
+        along, across = th[1] * c + th[2] * s, th[3] * c + th[4] * s
+        port = ca.horzcat(-heading_dir[:, 1], heading_dir[:, 0], ca.DM.zeros(heading_dir.shape[0], 1))
+        return ca.repmat(along, 1, 3) * heading_dir + ca.repmat(across, 1, 3) * port
 
     def vessel_velocity(self, v, ctx, th):
-        s = ca.mtimes(self._basis(ctx.ping_time_s, ctx), th)
-        return v + ca.repmat(s, 1, 3) * ctx.heading_dir_ping
+        return v + self._offset(ctx.ping_time_s, ctx.heading_dir_ping, th)
 
     def reference_velocity(self, v, ctx, th):
-        s = ca.mtimes(self._basis(ctx.reference_time_s, ctx), th)
-        return v + ca.repmat(s, 1, 3) * ctx.heading_dir_reference
+        return v + self._offset(ctx.reference_time_s, ctx.heading_dir_reference, th)
