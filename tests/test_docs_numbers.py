@@ -48,6 +48,14 @@ def test_diagnosis_limits_paragraph_is_the_committed_run():
     assert limits_paragraph(_result("diagnosis_random_walk.json")) in (ROOT / "docs" / "diagnosis.md").read_text()
 
 
+@pytest.mark.parametrize("result", ["diagnose_selftest.json", "diagnose_selftest_calibrated.json"])
+def test_selftest_rows_are_the_committed_runs(result):
+    """docs/diagnosis.md's self-test table: each row printed from its committed SELFTEST.json."""
+    from adcpdyn.estimators.diagnosis.selftest import markdown_row
+
+    assert markdown_row(_result(result)) in (ROOT / "docs" / "diagnosis.md").read_text()
+
+
 def test_survey_bench_table_is_the_committed_runs():
     from adcpdyn.benchmarks.survey import print_survey
 

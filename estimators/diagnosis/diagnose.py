@@ -63,17 +63,17 @@ PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
 class DiagnosisConfig:
     """Which effects to try and when a difference counts.
 
-    An effect is significant when its BIC improves on the current model's by more than
-    ``bic_margin`` AND it removes at least ``min_shrink`` of the held-out gap. A gap is
+    An effect is significant when its coloured-residual BIC (``delta_bic_hac``: the likelihood
+    ratio over the long-run/white variance ratio of its per-bin gains, never below the white one)
+    improves on the current model's by more than ``bic_margin`` AND it removes at least
+    ``min_shrink`` of the held-out gap. A gap is
     significant when its z-score (excess chi-square over its null standard deviation)
     exceeds ``gap_z`` and it exceeds ``min_gap`` (a practical floor: noise levels are
     estimated, so a few percent of excess is not evidence). Up to ``max_effects`` effects
     are chosen one after another; an effect sharing more than ``confounded_share`` of its
     parameters' variance with a base unknown or a chosen effect is named, not chosen.
 
-    On a random-walk base (real files) the BIC is the coloured-residual one (``delta_bic_hac``:
-    the likelihood ratio over the long-run/white variance ratio of its per-bin gains) and the
-    held-out gap need only shrink by ``min_shrink_walk``: a real file keeps structure no catalog
+    On a random-walk base (real files) the held-out gap need only shrink by ``min_shrink_walk``: a real file keeps structure no catalog
     effect explains, so a real effect removes a smaller share of the whole gap. Its gap's z is
     not a gate there: the noise levels are the data's own (variance components), so the white
     z of what they leave says little; the coloured BIC is the test. For the same reason the held-out
@@ -782,8 +782,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
     walk = base_model.random_walk  # a velocity per ping: coloured-residual BIC, smaller shrink share
 
-    def gain(s: EffectScore) -> float:  # the BIC change that decides: coloured-residual on a random-walk base
-        return s.delta_bic_hac if walk else s.delta_bic
+    def gain(s: EffectScore) -> float:  # the BIC change that decides: the coloured-residual one
+        return s.delta_bic_hac
 
     first_gain = {}
     for round_ in range(1, config.max_effects + 1):
@@ -938,7 +938,7 @@ def significant(s: EffectScore, ref_gap: float, config: DiagnosisConfig, walk: b
         return bool(s.delta_bic_hac < -config.bic_margin
                     and ((s.shrink_fraction >= config.min_shrink_walk and ref_gap > config.min_gap)
                          or (s.heldout_z > config.heldout_z_walk and ref_gap - s.gap_after >= config.min_gain_walk)))
-    return bool(s.delta_bic < -config.bic_margin and s.shrink_fraction >= config.min_shrink and ref_gap > config.min_gap)
+    return bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink and ref_gap > config.min_gap)
 
 
 def preference(scores: list, gain, bic_margin: float) -> list:

@@ -145,8 +145,8 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     if mine is None:
         why = result.base.get("skipped_effects", {}).get(row["expected"], "not among the candidates")
         return f"not tried: {why}"
-    # the BIC change of adding the effect (negative: better; the coloured one on a random-walk base)
-    detail = f"BIC change {mine['delta_bic_hac'] if result.base.get('navigation') == 'random_walk' else mine['delta_bic']:+.0f}, " \
+    # the BIC change of adding the effect (negative: better; the coloured one, which decides)
+    detail = f"BIC change {mine['delta_bic_hac']:+.0f}, " \
              f"shrink {100 * mine['shrink_fraction']:.0f} %" \
              + (f", held-out z {mine['heldout_z']:.1f}" if np.isfinite(mine.get("heldout_z", np.nan)) else "")
     limit = row.get("detection_limit")

@@ -174,6 +174,18 @@ def summarise(rows: list[dict], labels: list[str]) -> dict:
     }
 
 
+def markdown_row(res: dict) -> str:
+    """One self-test run (its SELFTEST.json) as a row of docs/diagnosis.md's table: the command,
+    top-1 overall and over the effects that left a gap, false alarms, by platform, median time."""
+    s = res["summary"]
+    command = f"`--selftest {res['n']} --seed {res['seed']}{' --selftest-calibrated' if res['calibrated'] else ''}`"
+    alarms = round(s["false_alarm_rate"] * s["n_effect_free"])
+    platforms = ", ".join(f"{p} {100 * v['top1']:.0f} % of {v['n']}" for p, v in s["by_platform"].items())
+    median = float(np.median([c["seconds"] for c in res["cases"]]))
+    return (f"| {command} | {s['n_cases']} | {100 * s['top1_accuracy']:.1f} % | {100 * s['top1_accuracy_visible']:.1f} % "
+            f"({s['n_invisible']} invisible) | {alarms} of {s['n_effect_free']} | {platforms} | {median:.1f} s |")
+
+
 def format_summary(s: dict) -> str:
     names = list(s["confusion"])
     cols = [v for v in next(iter(s["confusion"].values()))]
