@@ -310,6 +310,18 @@ def test_preference_takes_the_best_held_out_prediction_among_the_significant():
     assert order == ["moving_bed", "compass_offset", "heave"]
 
 
+def test_preference_breaks_a_tie_of_held_out_shrinks_by_the_bic():
+    """Shrinks within SHRINK_TIE predict alike (a sound-speed scale and a bed on one straight course:
+    0.9533 vs 0.9477): the better coloured BIC is named; a clearly better prediction still wins."""
+    from adcpdyn.estimators.diagnosis.diagnose import SHRINK_TIE, preference
+
+    gain = lambda s: s.delta_bic_hac  # noqa: E731
+    tie = [_score("moving_bed", 0.9533, -208.0), _score("sound_speed_error", 0.9533 - 0.5 * SHRINK_TIE, -213.8)]
+    assert preference(tie, gain, 10.0)[0].effect == "sound_speed_error"
+    apart = [_score("moving_bed", 0.9533, -208.0), _score("sound_speed_error", 0.9533 - 2 * SHRINK_TIE, -213.8)]
+    assert preference(apart, gain, 10.0)[0].effect == "moving_bed"
+
+
 def test_preference_keeps_the_nested_effect_unless_the_extra_unknowns_are_significant():
     from adcpdyn.estimators.diagnosis.diagnose import preference
 

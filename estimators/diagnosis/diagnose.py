@@ -941,14 +941,23 @@ def significant(s: EffectScore, ref_gap: float, config: DiagnosisConfig, walk: b
     return bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink and ref_gap > config.min_gap)
 
 
+SHRINK_TIE = 0.01  # held-out shrinks this close predict alike: the BIC decides between them
+
+
 def preference(scores: list, gain, bic_margin: float) -> list:
     """The scores in order of preference: the significant ones first, the one that predicts the
     held-out data best (largest shrink) ahead, since two effects the BIC both accepts are told apart
     by what they predict, not by in-sample fit under residuals whose colour is only estimated;
     an effect that contains a significant other as a special case (``Effect.nests``) goes behind
     it unless its extra unknowns are significant themselves (BIC better than the other's by
-    ``bic_margin``). The rest follow by BIC gain."""
+    ``bic_margin``). Shrinks within ``SHRINK_TIE`` of the largest are a tie, which the better BIC
+    breaks (the same prediction, fewer or better-spent unknowns). The rest follow by BIC gain."""
     significant = sorted((s for s in scores if s.significant), key=lambda s: -s.shrink_fraction)
+    if significant:
+        tied = [s for s in significant if s.shrink_fraction >= significant[0].shrink_fraction - SHRINK_TIE]
+        best = min(tied, key=gain)
+        significant.remove(best)
+        significant.insert(0, best)
     for big in list(significant):
         for name in get_effect(big.effect).nests:
             small = next((s for s in significant if s.effect == name), None)
