@@ -146,7 +146,7 @@ def limits_paragraph(res: dict, navigation: str = "random_walk") -> str:
                 peak = clean[f].get("attitude_delay_profile", {}).get("peak_s")
                 cell += f" (own delay peak at {peak:+.2f} s)" if peak is not None else " (own delay peak)"
             cells.append(cell)
-        unit = injected[[r["error"] for r in injected].index(error)]["unit"]
+        unit = next(r["unit"] for r in injected if r["error"] == error)
         parts.append(f"{error} {', '.join(cells)}{' ' + unit if unit else ''}")
     missed = [r for r in injected if not r["hit"]]
     under = [r for r in missed if r.get("detection_limit") is not None and r["size"] < r["detection_limit"]]

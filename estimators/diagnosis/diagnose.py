@@ -780,7 +780,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         # how the given unknowns co-vary (a compass deviation's A, B, C on one course): what a shift of them is judged by
         given_covariance = {"names": list(gm.effect_names), "matrix": cov.tolist()}
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
-    walk = base_model.random_walk  # a velocity per ping: coloured-residual BIC, smaller shrink share
+    walk = base_model.random_walk  # a velocity per ping: a smaller shrink share, or a paired held-out gain
 
     def gain(s: EffectScore) -> float:  # the BIC change that decides: the coloured-residual one
         return s.delta_bic_hac
@@ -996,13 +996,18 @@ def _fixed_points(base, terms, peaks, config, model, fit, pinned):
     return model, fit
 
 
+def held_at_delay(model: GapModel, key: str, d: float) -> dict:
+    """The unknowns a model exact at delay ``d`` holds: the unknown ending in ``key`` at ``d``, and the
+    effect unknowns the base already carries (:func:`_pinned_effect_parameters`)."""
+    return {**_pinned_effect_parameters(model, model.base), next(n for n in model.names if n.endswith(key)): float(d)}
+
+
 def fit_at_delay(base, terms, peaks, config, field: str, key: str, d: float, x: dict, sigma: dict):
     """(model, fit) exact at delay ``d``: every run's ``field`` (``reference_shift_s``, ``sample_shift_s``)
     set to it, the unknown ending in ``key`` pinned there, the fit started from ``x``."""
     shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **{field: float(d)}) for r in base.runs])
     model = GapModel(shifted, terms, peaks, solver=config.solver)
-    fixed = {**_pinned_effect_parameters(model, shifted), next(n for n in model.names if n.endswith(key)): float(d)}
-    return model, model.solve(model.start(x), sigma, fixed=fixed)
+    return model, model.solve(model.start(x), sigma, fixed=held_at_delay(model, key, d))
 
 
 REFERENCE_DELAY_SPAN_S = 3.0  # the reference delays a random-walk base's profile searches, +- (s)
@@ -1022,15 +1027,11 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
     between its knots): the estimate is then drawn to the delays that keep them there. Without
     ``profile``: held where ``values`` (the chosen model's) put it."""
 
-    def held(model: GapModel, d: float) -> dict:
-        return {**_pinned_effect_parameters(model, model.base),
-                next(n for n in model.names if n.endswith(REFERENCE_DELAY)): d}
-
     def at(d: float, x: dict):
         return fit_at_delay(base, terms, peaks, config, "reference_shift_s", REFERENCE_DELAY, d, x, sigma)
 
     def settled(model: GapModel, fit: Fit, d: float):  # the attitude's delays, if any, to their fixed point
-        return _fixed_points(model.base, terms, peaks, config, model, fit, held(model, d))
+        return _fixed_points(model.base, terms, peaks, config, model, fit, held_at_delay(model, REFERENCE_DELAY, d))
 
     if not profile:
         d = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY))

@@ -16,7 +16,7 @@ from ...cases.case import Case
 from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, _terms, applicable, base_from, fit_at_delay, hac_of_columns
 from .field_errors import FIELD_ERRORS, inject
-from .model import Fit, GapModel, free_jacobian, residual_peaks
+from .model import Fit, GapModel, free_jacobian
 from ..statistics.normal_equations import as_sparse, inverse_columns
 
 SEARCH = (1.0 / 16.0, 4.0)  # sizes searched: from the smallest typical one over 16 to the largest times 4
@@ -50,6 +50,12 @@ def signal_statistic(model: GapModel, fit: Fit, case: Case, error: str, size: fl
     return 1.0 / white, max(hac / white, 1.0)
 
 
+def selection_bar(model: GapModel, config: DiagnosisConfig, k: int) -> float:
+    """The coloured BIC's bar for ``k`` unknowns on ``model``'s observations: k log n + margin
+    (in units of 2 x log-likelihood)."""
+    return k * np.log(int((model.mask > 0).sum())) + config.bic_margin
+
+
 def signal_limit(model: GapModel, fit: Fit, case: Case, error: str, config: DiagnosisConfig, calibration=None) -> dict | None:
     """The smallest size of ``error`` whose signature passes the selection's coloured BIC bar
     (lambda / inflation > k log n + margin, k the catalog effect's unknowns), by bisection in log
@@ -57,8 +63,7 @@ def signal_limit(model: GapModel, fit: Fit, case: Case, error: str, config: Diag
     even the largest searched size passes, "below": True when the smallest already does}; None
     where the injected case makes another model."""
     typical = FIELD_ERRORS[error][2]
-    k = len(get_effect(FIELD_ERRORS[error][0]).parameters)
-    bar = k * np.log(int((model.mask > 0).sum())) + config.bic_margin
+    bar = selection_bar(model, config, len(get_effect(FIELD_ERRORS[error][0]).parameters))
 
     def passes(size):
         stat = signal_statistic(model, fit, case, error, size, config, calibration)
@@ -97,13 +102,13 @@ def own_delay_profile(model: GapModel, fit: Fit, config: DiagnosisConfig) -> dic
     base = model.base
     if not base.sampled or not applicable(base, "attitude_latency")[0]:
         return None
-    terms, peaks = _terms(base, "attitude_latency"), residual_peaks(model, fit)
+    terms = _terms(base, "attitude_latency")  # its refits seed no frequency: no residual peaks needed
     bound = next(p for p in get_effect("attitude_latency").parameters if p.name == "delay_s")
     delays = np.round(np.arange(bound.lower, bound.upper + 1e-9, DELAY_STEP_S), 6)
     base_ll = fit.log_likelihood(model)
 
     def at(d: float) -> float:
-        m, f = fit_at_delay(base, terms, peaks, config, "sample_shift_s", ATTITUDE_DELAY, d, fit.values, fit.sigma)
+        m, f = fit_at_delay(base, terms, {}, config, "sample_shift_s", ATTITUDE_DELAY, d, fit.values, fit.sigma)
         return float(f.log_likelihood(m) - base_ll)
 
     with ThreadPoolExecutor(max_workers=2) as pool:  # CasADi lets go of Python's lock
@@ -112,4 +117,4 @@ def own_delay_profile(model: GapModel, fit: Fit, config: DiagnosisConfig) -> dic
     zero = int(np.argmin(np.abs(delays)))
     return {"delays": delays.tolist(), "gain": gain.tolist(), "peak_s": float(delays[best]),
             "rise": float(gain[best] - gain[zero]),
-            "bar": float((np.log(int((model.mask > 0).sum())) + config.bic_margin) / 2)}
+            "bar": selection_bar(model, config, 1) / 2}
