@@ -263,6 +263,16 @@ def test_surge_is_named_on_a_run_known_to_stay_put_and_left_to_the_base_under_wa
     assert under_way["expected"] == "none" and "part of the base" in under_way["absorbed_by_base"]
 
 
+def test_surge_velocity_along_the_heading_and_to_port():
+    """The simulator's surge is its model's one equation: heading east (90 deg), the along-track
+    part goes east and the across part to starboard (south; axes north, east, down); at t = 0 only
+    the cosine terms remain, a quarter period later only the sine terms."""
+    surge = get_effect("surge")
+    p = {"omega_rad_s": 0.3, "cos_m_s": 0.2, "sin_m_s": 0.1, "across_cos_m_s": -0.05, "across_sin_m_s": 0.0}
+    v = surge.vessel_velocity_offset(np.array([0.0, np.pi / 2 / 0.3]), np.full(2, np.pi / 2), p)
+    assert v == pytest.approx(np.array([[0.05, 0.2, 0.0], [0.0, 0.1, 0.0]]), abs=1e-12)
+
+
 def test_a_nearly_as_good_effect_is_named_beside_the_chosen_one(monkeypatch):
     """Tilt low-pass on the pool boat: latency removes about three quarters of what the tilt
     low-pass removes. Named as an alternative when that share passes the bar, not otherwise."""

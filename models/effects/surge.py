@@ -1,5 +1,5 @@
 """The vessel surges: a horizontal velocity oscillating at one frequency, C cos w t + S sin w t
-along the heading and C' cos w t + S' sin w t across it (to port: the heading the beams' sensor
+along the heading and C' cos w t + S' sin w t across it (to starboard: the heading the beams' sensor
 reads may sit off the bow by the installation, so the direction is the data's, not assumed).
 
 Modelled only where the base has no navigation to follow it (a run held still, the pool: a
@@ -34,12 +34,12 @@ class Surge(Effect):
                 "sin_m_s": float(amplitude * np.cos(phase)), "across_cos_m_s": 0.0, "across_sin_m_s": 0.0}
 
     def vessel_velocity_offset(self, t, heading, params):
-        w, tau = params["omega_rad_s"], np.asarray(t, dtype=float)
-        c, s = np.cos(w * tau), np.sin(w * tau)
-        along = params["cos_m_s"] * c + params["sin_m_s"] * s
-        across = params.get("across_cos_m_s", 0.0) * c + params.get("across_sin_m_s", 0.0) * s
-        return np.column_stack([along * np.cos(heading) - across * np.sin(heading),
-                                along * np.sin(heading) + across * np.cos(heading), np.zeros_like(along)])
+        """The simulator's surge: the model's one equation (:meth:`_offset`) evaluated on numbers."""
+        th = ca.DM([params["omega_rad_s"], params["cos_m_s"], params["sin_m_s"],
+                    params.get("across_cos_m_s", 0.0), params.get("across_sin_m_s", 0.0)])
+        heading = np.asarray(heading, dtype=float)
+        heading_dir = ca.DM(np.column_stack([np.cos(heading), np.sin(heading), np.zeros_like(heading)]))
+        return np.asarray(self._offset(np.asarray(t, dtype=float), heading_dir, th))
 
     def truth_values(self, params):
         """None: the simulator surges along the vessel's heading, the model's axes are the sensor's."""
@@ -58,8 +58,8 @@ class Surge(Effect):
         tau = ca.DM(t)
         c, s = ca.cos(th[0] * tau), ca.sin(th[0] * tau)
         along, across = th[1] * c + th[2] * s, th[3] * c + th[4] * s
-        port = ca.horzcat(-heading_dir[:, 1], heading_dir[:, 0], ca.DM.zeros(heading_dir.shape[0], 1))
-        return ca.repmat(along, 1, 3) * heading_dir + ca.repmat(across, 1, 3) * port
+        starboard = ca.horzcat(-heading_dir[:, 1], heading_dir[:, 0], ca.DM.zeros(heading_dir.shape[0], 1))  # north, east, down
+        return ca.repmat(along, 1, 3) * heading_dir + ca.repmat(across, 1, 3) * starboard
 
     def vessel_velocity(self, v, ctx, th):
         return v + self._offset(ctx.ping_time_s, ctx.heading_dir_ping, th)
