@@ -6,6 +6,7 @@ import dataclasses
 import json
 from types import SimpleNamespace
 
+import casadi as ca
 import numpy as np
 import pytest
 from conftest import REAL, refit_without
@@ -144,6 +145,7 @@ def test_effect_free_case_gets_none():
     assert len(r.where) >= 8  # every channel is reported, ranked
 
 
+@pytest.mark.slow  # 8 s: `make test-slow`, CI's second step
 def test_cli_diagnose_writes_the_report(tmp_path, latency_diagnosis):
     from adcpdyn.cases.io import write_case
     from adcpdyn.cli import main
@@ -263,7 +265,7 @@ def test_surge_is_named_on_a_run_known_to_stay_put_and_left_to_the_base_under_wa
     assert under_way["expected"] == "none" and "part of the base" in under_way["absorbed_by_base"]
 
 
-def test_surge_velocity_along_the_heading_and_to_port():
+def test_surge_velocity_along_the_heading_and_to_starboard():
     """The simulator's surge is its model's one equation: heading east (90 deg), the along-track
     part goes east and the across part to starboard (south; axes north, east, down); at t = 0 only
     the cosine terms remain, a quarter period later only the sine terms."""
@@ -271,6 +273,35 @@ def test_surge_velocity_along_the_heading_and_to_port():
     p = {"omega_rad_s": 0.3, "cos_m_s": 0.2, "sin_m_s": 0.1, "across_cos_m_s": -0.05, "across_sin_m_s": 0.0}
     v = surge.vessel_velocity_offset(np.array([0.0, np.pi / 2 / 0.3]), np.full(2, np.pi / 2), p)
     assert v == pytest.approx(np.array([[0.05, 0.2, 0.0], [0.0, 0.1, 0.0]]), abs=1e-12)
+
+
+def test_heave_velocity_is_the_rate_of_its_depth():
+    """The simulator's heave is its model's one equation: the vertical velocity is the time derivative
+    of G's depth (central differences), at t = 0 the depth is C and the velocity omega S."""
+    heave = get_effect("heave")
+    p = {"omega_rad_s": 1.3, "cos_m": 0.07, "sin_m": -0.04}
+    t, h = np.linspace(0.0, 20.0, 2001), 1e-4
+    z = lambda tt: heave.g_position_offset(tt, p)[:, 2]
+    w = heave.vessel_velocity_offset(t, np.zeros_like(t), p)
+    assert w[:, :2] == pytest.approx(0.0) and heave.g_position_offset(t, p)[:, :2] == pytest.approx(0.0)
+    assert w[:, 2] == pytest.approx((z(t + h) - z(t - h)) / (2 * h), abs=1e-8)
+    assert (z(np.zeros(1))[0], w[0, 2]) == pytest.approx((0.07, 1.3 * -0.04), abs=1e-15)
+
+
+@pytest.mark.parametrize("name, params", [("compass_offset", {"A_rad": 0.04}),
+                                          ("compass_deviation", {"A_rad": 0.03, "B_rad": -0.02, "C_rad": 0.05})])
+def test_compass_errors_read_the_models_heading_and_correct_it_back(name, params):
+    """The simulated compass reads psi + A + B sin psi + C cos psi of the true heading psi; the
+    true-minus-read correction undoes it exactly, the one on the read samples to second order in
+    the error (its size is 0.06 rad here: under 4e-3 rad)."""
+    effect = get_effect(name)
+    psi = np.linspace(-np.pi, np.pi, 13)
+    error = params["A_rad"] + params.get("B_rad", 0.0) * np.sin(psi) + params.get("C_rad", 0.0) * np.cos(psi)
+    read = effect.wrap_attitude_sensor(lambda t: np.column_stack([psi, np.ones_like(psi), -np.ones_like(psi)]), params)(None)
+    assert read[:, 0] == pytest.approx(psi + error, abs=1e-15) and np.array_equal(read[:, 1:], np.tile([1.0, -1.0], (psi.size, 1)))
+    assert read[:, 0] + effect.heading_correction(psi, params) == pytest.approx(psi, abs=1e-15)
+    on_samples = np.asarray(effect.sampled_heading_correction(ca.DM(read[:, 0]), ca.DM(effect.vector(params)))).ravel()
+    assert np.abs(read[:, 0] + on_samples - psi).max() < (4e-3 if params.get("B_rad") else 1e-15)
 
 
 def test_a_nearly_as_good_effect_is_named_beside_the_chosen_one(monkeypatch):

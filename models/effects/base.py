@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import casadi as ca
 import numpy as np
 
 
@@ -188,3 +189,27 @@ class Effect:
     def sampled_heading_correction(self, psi, th):
         """Added to the read heading psi to give the true heading."""
         return 0
+
+
+class MisreadsHeading(Effect):
+    """An effect on the compass alone: the simulator's sensor reads :meth:`heading_reading` (the
+    model's one equation, evaluated on numbers), and the true-minus-read heading follows from it."""
+
+    def heading_read(self, psi, params: dict) -> np.ndarray:
+        """The heading read for true headings psi (n,)."""
+        psi = np.asarray(psi, dtype=float)
+        return np.asarray(self.heading_reading(ca.DM(psi), ca.DM(self.vector(params)))).reshape(psi.shape)
+
+    def wrap_attitude_sensor(self, read, params: dict):
+        def misread(t):
+            ypr = read(t).copy()
+            ypr[:, 0] = self.heading_read(ypr[:, 0], params)
+            return ypr
+        return misread
+
+    def heading_correction(self, psi, params: dict):
+        psi = np.asarray(psi, dtype=float)
+        return psi - self.heading_read(psi, params)
+
+    def sampled_heading_correction(self, psi, th):
+        return psi - self.heading_reading(psi, th)  # the error at the read heading: first order in it

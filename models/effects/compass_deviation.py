@@ -5,12 +5,12 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .base import Effect, Parameter
+from .base import MisreadsHeading, Parameter
 
 DEG = np.deg2rad(1.0)
 
 
-class CompassDeviation(Effect):
+class CompassDeviation(MisreadsHeading):
     name = "compass_deviation"
     description = "heading reads psi + A + B sin psi + C cos psi"
     parameters = (
@@ -21,20 +21,5 @@ class CompassDeviation(Effect):
     needs_reference = True
     nests = ("compass_offset",)  # B = C = 0
 
-    def wrap_attitude_sensor(self, read, params):
-        def deviated(t):
-            ypr = read(t).copy()
-            psi = ypr[:, 0]
-            ypr[:, 0] = psi + params["A_rad"] + params["B_rad"] * np.sin(psi) + params["C_rad"] * np.cos(psi)
-            return ypr
-        return deviated
-
-    def heading_correction(self, psi, params):
-        psi = np.asarray(psi, dtype=float)
-        return -(params["A_rad"] + params["B_rad"] * np.sin(psi) + params["C_rad"] * np.cos(psi))
-
     def heading_reading(self, psi, th):
         return psi + th[0] + th[1] * ca.sin(psi) + th[2] * ca.cos(psi)
-
-    def sampled_heading_correction(self, psi, th):
-        return -(th[0] + th[1] * ca.sin(psi) + th[2] * ca.cos(psi))  # first order in the deviation

@@ -7,29 +7,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import Effect, Parameter
+from .base import MisreadsHeading, Parameter
 
 DEG = np.deg2rad(1.0)
 
 
-class CompassOffset(Effect):
+class CompassOffset(MisreadsHeading):
     name = "compass_offset"
     description = "heading reads psi + A (a constant compass error since the calibration)"
     parameters = (Parameter("A_rad", 0.02, -0.5, 0.5, draw=(2.0 * DEG, 5.0 * DEG)),)
     needs_reference = True
 
-    def wrap_attitude_sensor(self, read, params):
-        def offset(t):
-            ypr = read(t).copy()
-            ypr[:, 0] = ypr[:, 0] + params["A_rad"]
-            return ypr
-        return offset
-
-    def heading_correction(self, psi, params):
-        return -params["A_rad"] * np.ones_like(np.asarray(psi, dtype=float))
-
     def heading_reading(self, psi, th):
         return psi + th[0]
-
-    def sampled_heading_correction(self, psi, th):
-        return -th[0]

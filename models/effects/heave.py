@@ -17,25 +17,25 @@ class Heave(Effect):
         Parameter("sin_m", 0.05, -3.0, 3.0, draw=(0.05, 0.15)),
     )
 
-    @staticmethod
-    def _z(t, p, t_ref=0.0):
-        w = p["omega_rad_s"]
-        tau = np.asarray(t, dtype=float) - t_ref
-        return p["cos_m"] * np.cos(w * tau) + p["sin_m"] * np.sin(w * tau), \
-            w * (-p["cos_m"] * np.sin(w * tau) + p["sin_m"] * np.cos(w * tau))
+    def _numeric(self, t, params):
+        """The model's heave (:meth:`_sym`, the one equation) evaluated on numbers: (z, dz/dt) at ``t``."""
+        z, w = self._sym(np.asarray(t, dtype=float), ca.DM(self.vector(params)))
+        return np.asarray(z).ravel(), np.asarray(w).ravel()
 
     def vessel_velocity_offset(self, t, heading, params):
-        _, w = self._z(t, params)
+        _, w = self._numeric(t, params)
         return np.column_stack([np.zeros_like(w), np.zeros_like(w), w])
 
     def g_position_offset(self, t, params):
-        z, _ = self._z(t, params)
+        z, _ = self._numeric(t, params)
         return np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
 
     def initial(self, ctx):
         return np.array([ctx.residual_peak("bt_vertical"), 0.0, 0.0])
 
-    def _sym(self, t, th):
+    @staticmethod
+    def _sym(t, th):
+        """(z, dz/dt) as rows over the times ``t``: z = C cos w t + S sin w t (down positive)."""
         tau = ca.DM(t).T
         return (th[1] * ca.cos(th[0] * tau) + th[2] * ca.sin(th[0] * tau),
                 th[0] * (-th[1] * ca.sin(th[0] * tau) + th[2] * ca.cos(th[0] * tau)))
