@@ -20,8 +20,9 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -n auto --dist worksteal
 
-# the tests marked slow (minutes; not in `make test`): every diagnose variant of the fuzz harness, the real
-# transect's reference latency
+# the tests marked slow (not in `make test`, which stays under 3 minutes; .ci/run runs them as its second
+# step): the fuzz harness's case files through every verb and diagnose on every valid variant, the real
+# transect's reference latency, the field self-tests and the other calls of 8 s and more
 test-slow: $(STAMP)
 	$(PY) -m pytest -n auto --dist worksteal -m slow
 

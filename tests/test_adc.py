@@ -114,6 +114,7 @@ def test_water_profile_no_rotation_limit():
     assert np.max(np.abs(out.water_velocity_m_s[ok] - case.truth.water_velocity_m_s[ok])) < 1e-6
 
 
+@pytest.mark.slow  # 10 s: `make test-slow`, CI's second step
 def test_pings_the_newton_steps_leave_unconverged_go_to_casadi_rootfinder():
     """With no Newton step the closed form's pings stay ~1e-5 m/s off and casadi.rootfinder
     must finish them: same answer as the default iteration."""

@@ -121,6 +121,7 @@ def test_vessel_frame_installation_yaw_against_reference(lake_case):
     assert r.installation_ypr_se_rad[0] < np.deg2rad(0.1)
 
 
+@pytest.mark.slow  # 23 s: `make test-slow`, CI's second step
 def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_case, capsys):
     """With the bed a parameter (``constant``), one straight run cannot tell a bed moving under the
     bottom track from a yaw error: the report names the pair in words, the yaw's standard error
@@ -241,6 +242,7 @@ def test_random_walk_calibration_finds_the_installation_with_a_velocity_per_ping
         CalibrationConfig(navigation="spline")
 
 
+@pytest.mark.slow  # 8 s: `make test-slow`, CI's second step
 def test_head_sensor_heading_misalignment_against_reference_and_applied_by_correct():
     """A head compass reading 25 degrees too far clockwise: calibration finds -25 degrees and the
     static correction with that CALIB.json follows the true course, while without it it does not."""
@@ -376,6 +378,7 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     assert np.array_equal(problems["assembled"].jacobian_fun.gram_sparsity().toarray(), (pattern.T @ pattern).toarray() != 0)
 
 
+@pytest.mark.slow  # 9 s: `make test-slow`, CI's second step
 def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
     """End to end on a short deep-water run with GNSS: the Gauss-Newton solve driven by the
     assembled Jacobian ends where the one driven by CasADi's symbolic Jacobian does."""

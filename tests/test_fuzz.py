@@ -35,6 +35,7 @@ def _ran(counts, verb, what):
     return counts.get((verb, what), 0)
 
 
+@pytest.mark.slow  # 54 s: `make test-slow`, CI's second step
 def test_malformed_case_files_through_every_verb(fuzz):
     folder, base = fuzz
     items = [(v, "case") for v in case_variants(base["pool"], folder / "cases")]
@@ -140,16 +141,16 @@ def test_the_judge_catches_what_it_is_for(tmp_path):
 def test_valid_variants_through_diagnose(fuzz):
     """The slow verb on every case variant the format allows (a few seconds each)."""
     folder, base = fuzz
-    problems = []
-    (folder / "out").mkdir(exist_ok=True)
+    problems, out = [], folder / "out_diagnose"  # its own: the other verbs' outputs share "out"
+    out.mkdir(exist_ok=True)
     for v in case_variants(base["pool"], folder / "cases_slow"):
         if v.expect == "error":
             continue
-        d = folder / "out" / "d.json"
+        d = out / "d.json"
         o = run(["diagnose", str(v.path), "--effects", "heave", "--out", str(d)])
         problem = judge(v, "diagnose", o, [d], folder)
         if problem:
             problems.append(f"{v.name}: {problem}")
-        for p in folder.joinpath("out").iterdir():
+        for p in out.iterdir():
             p.unlink()
     assert not problems, "\n".join(problems)

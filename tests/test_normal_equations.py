@@ -299,6 +299,7 @@ def test_lowpass_of_samples_matches_the_closed_form_step_and_ramp_responses():
     np.testing.assert_allclose(lowpass(t, np.full(t.size, 0.3), tau), 0.3)
 
 
+@pytest.mark.slow  # 13 s: `make test-slow`, CI's second step
 def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     """A clean run and an injected bed across the course on the file's own motion, diagnosed blind:
     the bed is named first, the table and the files say so; the CLI refuses a call without --out."""
@@ -328,6 +329,7 @@ def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     assert main(["diagnose", str(tmp_path / "x.h5"), "--field-selftest"]) == 2  # one line: expects --out
 
 
+@pytest.mark.slow  # 13 s: `make test-slow`, CI's second step
 def test_field_selftest_diagnoses_on_top_of_the_files_own_effects():
     """A file that carries an effect of its own (here attitude samples stamped 0.5 s late) names it on
     the clean run; every injected error is then diagnosed on top of it (given, not a candidate), and an

@@ -221,6 +221,7 @@ def test_shallow_water_two_way_agrees_with_instantaneous_within_txrx_difference(
     assert np.max(np.abs(two_way - inst)) < 2e-3  # 5 m: a few-ms round trip
 
 
+@pytest.mark.slow  # 11 s: `make test-slow`, CI's second step
 def test_deep_water_two_way_differs_from_instantaneous():
     two_way, inst, u_tx, u_rx = _two_way_vs_instantaneous(get_scenario("deep_ocean"))
     assert np.sqrt(np.mean((two_way - inst) ** 2)) > 0.02  # 300 m: the beams turn during the flight

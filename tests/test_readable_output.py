@@ -178,6 +178,7 @@ def diagnosis():
     return case, adcpdyn.diagnose(case, effects=["attitude_latency"])
 
 
+@pytest.mark.slow  # 9 s: `make test-slow`, CI's second step
 def test_diagnosis_figure_hz_up_to_the_pings_nyquist_channels_in_order_readable(diagnosis, tmp_path):
     import matplotlib.pyplot as plt
 
