@@ -72,15 +72,17 @@ def has_moving_reference(case: Case) -> bool:
 
 def choose_navigation(case: Case, attitude_source: str, requested: str = "auto") -> str:
     """A run's vessel-velocity model: ``requested``, or for ``auto`` a velocity per ping
-    (``random_walk``) where the run is under way on a moving reference and its beams take the
-    sensor's samples (a real boat, which changes speed between two fixes: the bottom track sees it,
-    a smooth curve does not), ``knots`` where a motion model follows the attitude (its course as
-    smooth as the model) or the reference stays put."""
+    (``random_walk``) where the beams take the sensor's samples and no reference holds the run
+    still (a real boat, which changes speed between two fixes: the bottom track sees it, a smooth
+    curve does not; without a reference the bottom track alone follows it, and a smooth curve
+    through it leaves the boat's own motion as a gap), ``knots`` where a motion model follows the
+    attitude (its course as smooth as the model) or the reference stays put."""
     if requested not in NAVIGATION_CHOICES:
         raise ValueError(f"navigation: expected one of {list(NAVIGATION_CHOICES)}, got {requested!r}")
     if requested != "auto":
         return requested
-    return "random_walk" if has_moving_reference(case) and attitude_source == "samples" else "knots"
+    held_still = case.reference is not None and case.reference.stationary
+    return "random_walk" if attitude_source == "samples" and not held_still else "knots"
 
 
 def channel_slices(channels: list[tuple[str, int]]) -> dict:

@@ -416,6 +416,25 @@ def test_reference_latency_found_on_a_real_transect():
     assert 0 < se < 0.2 and abs(est - 2.0) < 3 * se
 
 
+@pytest.mark.slow  # 14 s: `make test-slow`
+@pytest.mark.skipif(not (REAL / "RDI_withBT.000").is_file(), reason="real file absent")
+def test_a_real_transect_without_gnss_gets_a_base_that_follows_the_boat():
+    """RDI_withBT (no GNSS: the bottom track alone), 700-1100 s, where the boat's motion is most
+    irregular: a smooth velocity through the bottom track leaves that motion as a gap "outside the
+    catalog"; the default base (a velocity per ping, as with GNSS) follows it and finds no gap, and
+    a beam-angle error stopped at its bound (fitting the bed's slant ranges there) is not named."""
+    from adcpdyn import api
+
+    case = api.import_file(REAL / "RDI_withBT.000", start_s=700.0, end_s=1100.0).case
+    assert case.reference is None
+    smooth = diagnose(case, DiagnosisConfig(navigation="knots"))
+    assert smooth.verdict == "none" and smooth.gap_z_before > 50
+    walk = diagnose(case, DiagnosisConfig())
+    assert walk.base["navigation"] == "random_walk" and walk.verdict == "none" and walk.gap_z_before < 3
+    held = [s for s in walk.ranking if s["at_bound"]]
+    assert all(not s["significant"] for s in held)
+
+
 def test_reference_delay_profile_holds_the_delay_and_reports_its_curvature():
     """On a random-walk base the reference delay is pinned at its profile's best (never left free to
     the joint fit), inside the searched span, with a positive standard error from the profile; the
@@ -454,6 +473,9 @@ def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement(
     assert not significant(dataclasses.replace(s, heldout_z=0.0, shrink_fraction=0.3), 0.05, config, walk=True)
     assert not significant(s, -0.02, config, walk=False)  # knots: the gap floor holds
     assert significant(dataclasses.replace(s, shrink_fraction=0.3), 0.4, config, walk=False)
+    # an unknown stopped at a bound of its plausible range: standing in for something else, on either base
+    held = dataclasses.replace(s, at_bound=["heave.omega_rad_s"], shrink_fraction=0.3)
+    assert not significant(held, -0.02, config, walk=True) and not significant(held, 0.4, config, walk=False)
     with pytest.raises(ValueError, match="min_gain_walk: expected a held-out excess >= 0"):
         DiagnosisConfig(min_gain_walk=-0.1)
     with pytest.raises(ValueError, match="heldout_z_walk: expected a finite"):

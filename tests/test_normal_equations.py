@@ -171,8 +171,9 @@ def test_random_walk_rows_are_velocity_increments_over_root_dt():
 
 
 def test_auto_navigation_walks_where_a_real_boat_is_under_way():
-    """auto: a velocity per ping for a moving reference with the sensor's samples in the beams (a real
-    boat), knots where a motion model follows the attitude or the reference stays put."""
+    """auto: a velocity per ping where the sensor's samples are in the beams (a real boat) and no
+    reference holds the run still, with or without a moving reference; knots where a motion model
+    follows the attitude or the reference stays put."""
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
     from adcpdyn.estimators.measurement_model import choose_navigation
@@ -184,6 +185,8 @@ def test_auto_navigation_walks_where_a_real_boat_is_under_way():
     assert choose_navigation(case, "model") == "knots"
     still = case.replace(reference=dataclasses.replace(case.reference, stationary=True))
     assert choose_navigation(still, "samples") == "knots"
+    assert choose_navigation(case.replace(reference=None), "samples") == "random_walk"  # the bottom track alone follows it
+    assert choose_navigation(case.replace(reference=None), "model") == "knots"
     assert choose_navigation(case, "samples", "knots") == "knots"
     with pytest.raises(ValueError, match="navigation: expected one of"):
         choose_navigation(case, "samples", "spline")

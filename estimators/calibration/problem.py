@@ -108,8 +108,9 @@ class CalibrationConfig:
         velocity at every ping under a random-walk prior, its intensity and every noise level
         from the data by variance components: a real boat's speed changes between two fixes are
         motion, which the bottom track sees and a smooth curve does not) or ``auto`` (the random
-        walk for a run under way on a moving reference whose beams take the sensor's samples, as a
-        real file's do; knots otherwise: :func:`~adcpdyn.estimators.measurement_model.choose_navigation`).
+        walk for a run whose beams take the sensor's samples and that no stationary reference
+        holds still, as a real file's do; knots otherwise:
+        :func:`~adcpdyn.estimators.measurement_model.choose_navigation`).
     lever_box_m : float, optional
         Bound on every lever-arm coordinate (default: half the vessel length, else 10 m).
     installation_bound_rad : float

@@ -521,7 +521,9 @@ def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
     if e.needs_reference and not moving and not (name == "moving_bed" and stationary):
         return False, "needs a moving reference velocity"
     if name == "surge" and not stationary:  # a run held still (the pool) has no navigation to follow a surge
-        return False, "part of the base: its navigation (piecewise-linear velocity through the reference or bottom track) follows speed changes"
+        how = ("a velocity at every ping" if any(r.random_walk for r in base.runs)
+               else "a piecewise-linear velocity")
+        return False, f"part of the base: its navigation ({how} through the reference or bottom track) follows speed changes"
     if name == "forced_roll":
         return False, ("part of the base: its motion model's modes may be steady (wave-forced), as the calibration's; an "
                        "oscillation it misses shows as a gap at its frequency")
@@ -933,7 +935,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
 def significant(s: EffectScore, ref_gap: float, config: DiagnosisConfig, walk: bool) -> bool:
     """Whether an effect is significant against the current model (held-out gap ``ref_gap``): its
     BIC better by the margin (the coloured one on a random-walk base), and out of sample a share of
-    the held-out gap removed, on a random-walk base alternatively a paired held-out improvement."""
+    the held-out gap removed, on a random-walk base alternatively a paired held-out improvement.
+    Never with an unknown stopped at a bound of the effect's plausible range (``at_bound``): the
+    data want it beyond anything the effect can be, so it stands in for something else (a 5.7-deg
+    beam-angle error fitting a bed's slant ranges on a real transect without GNSS)."""
+    if s.at_bound:
+        return False
     if walk:
         return bool(s.delta_bic_hac < -config.bic_margin
                     and ((s.shrink_fraction >= config.min_shrink_walk and ref_gap > config.min_gap)
