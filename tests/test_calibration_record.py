@@ -57,6 +57,7 @@ def test_from_json_round_trip(calibrated):
     assert rec.noise_sigma == json.loads(json.dumps(result.noise_sigma))
     assert [r.case for r in rec.runs] == [r.case for r in result.runs] == ["pool_m0"]
     assert rec.runs[0].attitude_model is not None
+    assert rec.runs[0].navigation == result.runs[0].navigation == "knots"  # the base it was fitted on, per run
     assert rec.heading_misalignment_rad is None  # a run at rest: no course to turn onto
     assert rec.data["schema_version"] == 3 and as_record(rec) is rec
 
@@ -99,3 +100,4 @@ def test_record_types_a_survey_calibration():
     with pytest.raises(ValueError, match=r"^calibration: runs\[1\].moving_bed_velocity_m_s\[0\]: expected"):
         CalibrationRecord.from_dict({**d, "runs": [{"case": "x", "moving_bed_velocity_m_s": [0.0, 0.0]},
                                                    {"case": "y", "moving_bed_velocity_m_s": [9.0, 0.0]}]})
+

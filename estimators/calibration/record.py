@@ -85,6 +85,7 @@ class RunRecord:
     noise_sigma: dict
     chi2_per_channel: dict
     transducer_depth_offset_se_m: float | None = None
+    navigation: str | None = None  # "knots" | "random_walk"; None in files older than it
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,6 +226,7 @@ class CalibrationRecord:
             transducer_depth_offset_m=_float_or_none(r.get("transducer_depth_offset_m")),
             transducer_depth_offset_se_m=_float_or_none(r.get("transducer_depth_offset_se_m")),
             noise_sigma=dict(r.get("noise_sigma") or {}), chi2_per_channel=dict(r.get("chi2_per_channel") or {}),
+            navigation=r.get("navigation"),
         ) for r in c.get("runs") or [])
         solver = c.get("solver") or {}
         return cls(
