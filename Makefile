@@ -27,7 +27,7 @@ test-slow: $(STAMP)
 	$(PY) -m pytest -n auto --dist worksteal -m slow
 
 bench: $(STAMP)
-	@for suite in correction calibration formulations solvers scale survey surveyday diagnosis compliance; do \
+	@for suite in correction calibration formulations solvers scale survey surveyday diagnosis diagnosis-survey compliance; do \
 		$(VENV)/bin/adcpdyn bench $$suite --quick --out benchmarks/results || exit 1; done
 
 clean:

@@ -589,7 +589,8 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         The base's vessel velocity: a velocity at every ping tied by a random-walk prior whose
         intensity the data set (a real boat's ping-to-ping speed changes are motion), or a
         piecewise-linear curve through knots (smooth simulated courses); ``auto`` (default): the
-        random walk for runs under way on a moving reference, knots for stationary ones.
+        random walk where the beams take the sensor's samples (every real file, with GNSS or without),
+        knots where a motion model follows the attitude or the reference is stationary.
     given : sequence of str, optional
         Effects the run is known to carry (e.g. what its clean run named): fitted first and kept
         in every model, so the candidates are judged on top of them (``result.given`` holds
@@ -659,15 +660,18 @@ def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "a
 def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=None, attitude: str = "auto",
                    sizes: dict | None = None, out=None, fmt: str = "png",
                    progress: Callable[[str], None] | None = None, accept_other_instrument: bool = False) -> dict:
-    """What this file can detect: each field error (compass offset, attitude and reference
-    latency, moving bed, sound speed) injected at typical sizes into the file's recorded channels,
-    and each run diagnosed blind with the file's calibration.
+    """What this file (or survey) can detect: each field error (compass offset, attitude and
+    reference latency, moving bed, sound speed, tilt low-pass, heave) injected at typical sizes into
+    the recorded channels, and each run diagnosed blind with the file's calibration.
 
     Parameters
     ----------
-    case : path, Case or ImportedCase
+    case : path, Case or ImportedCase, or a list of them
+        One run, or a survey's runs (one boat, one river: each error written into every run, the
+        bed one velocity across the survey's mean course, and diagnosed jointly).
     calibration : path, CalibrationResult, CalibrationRecord or dict, optional
-        The file's calibration; without one the file is calibrated on itself first (8 starts).
+        The file's (survey's) calibration; without one it is calibrated on itself first (8 starts,
+        jointly for a survey).
     navigation, effects, attitude, accept_other_instrument : as :func:`diagnose`.
     sizes : dict, optional
         {error: sizes} (``adcpdyn.estimators.diagnosis.field_errors.FIELD_ERRORS`` names and
@@ -686,20 +690,28 @@ def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
     _choice("fmt", fmt, FIGURE_FORMATS)
+    items = list(case) if _many(case) else [case]
+    if not items:
+        raise ValueError("case: expected at least one case")
     if out is not None:
         from .cases.atomic import check_output_file
 
-        check_output_file(out, *[p for p in [case, calibration] if isinstance(p, (str, os.PathLike))], option="out")
-    src, notes = _prepared(_source(case, "case"))
+        check_output_file(out, *[p for p in [*items, calibration] if isinstance(p, (str, os.PathLike))], option="out")
+    prepared = [_prepared(_source(c, "case")) for c in items]
+    notes = [n for _, ns in prepared for n in ns]
+    sources = _keyed([s for s, _ in prepared])
     note = None
     if calibration is None:
-        calibration = calibrate(src.case, n_starts=8)
-        note = "calibrated on itself (8 starts): no --calibration given"
+        calibration = calibrate([s.case for s in sources] if len(sources) > 1 else sources[0].case, n_starts=8)
+        note = "calibrated on itself (8 starts" + (", jointly" if len(sources) > 1 else "") + "): no --calibration given"
     cal = as_record(calibration)
-    run, applied = as_calibrated_run(src.case, src.path or src.case.name, cal, accept_other_instrument)
-    notes = notes + applied
+    runs = []
+    for s in sources:
+        run, applied = as_calibrated_run(s.case, s.path or s.case.name, cal, accept_other_instrument)
+        runs.append(run)
+        notes += applied
     config = _diagnosis_config(effects, attitude, navigation)
-    res = _field_selftest(run, cal, config, sizes=sizes, progress=progress)
+    res = _field_selftest(runs if len(runs) > 1 else runs[0], cal, config, sizes=sizes, progress=progress)
     res["notes"] = notes + ([note] if note else [])
     if out is not None:
         write_field_selftest(res, out, fmt=fmt)

@@ -630,10 +630,16 @@ def _diagnose_field_selftest(args) -> int:
     from .cases.atomic import check_output_file
     from .estimators.diagnosis.field_selftest import format_field_selftest
 
-    if len(args.case) != 1 or not args.out or args.joint:
-        raise ValueError("diagnose: --field-selftest expects one CASE.h5 and --out SELFTEST.json (no --joint)")
-    check_output_file(args.out, args.case[0], args.calibration)
-    res = field_selftest(args.case[0], args.calibration, navigation=args.navigation, effects=args.effects,
+    from .cases.collect import collect_case_paths, is_many
+
+    if not args.case or not args.out:
+        raise ValueError("diagnose: --field-selftest expects CASE.h5 (several with --joint: a survey) and --out SELFTEST.json")
+    if is_many(args.case) and not args.joint:
+        raise ValueError(f"diagnose: {' '.join(args.case)}: several cases (a folder, a glob or more than one file): add "
+                         "--joint to self-test them as one survey")
+    paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
+    check_output_file(args.out, *paths, args.calibration)
+    res = field_selftest(paths if args.joint else paths[0], args.calibration, navigation=args.navigation, effects=args.effects,
                          accept_other_instrument=args.accept_other_instrument,
                          attitude=args.attitude, out=args.out, fmt=args.format,
                          progress=_Progress("diagnose"))
@@ -908,11 +914,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--navigation", default="auto", choices=["auto", "random_walk", "knots"],
                    help="the base's vessel velocity: random_walk (a velocity at every ping, its random-walk intensity "
                         "from the data: a real boat's speed changes between fixes are motion), knots (a smooth curve) "
-                        "or auto: random_walk for a run under way on a moving reference, knots for a stationary one")
+                        "or auto: random_walk where the beams take the attitude sensor's samples (every real file), knots where a "
+                        "motion model follows the attitude or the reference is stationary")
     s.add_argument("--field-selftest", action="store_true",
                    help="what this file can detect: the field's errors (compass offset, attitude and reference latency, "
-                        "moving bed, sound speed) injected at typical sizes into its recorded channels, each diagnosed "
-                        "blind with its calibration (--calibration, else calibrated on itself)")
+                        "moving bed, sound speed, tilt low-pass, heave) injected at typical sizes into its recorded "
+                        "channels, each diagnosed blind with its calibration (--calibration, else calibrated on itself); "
+                        "with --joint a survey's runs, each error in every run, diagnosed jointly")
     s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
     s.add_argument("--selftest-calibrated", action="store_true",
@@ -924,7 +932,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = command("bench", "benchmarks with their targets", cmd_bench)
     s.add_argument("suite", choices=["calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis",
-                                     "compliance", "navigation"],
+                                     "diagnosis-survey", "compliance", "navigation"],
                    help="which benchmark")
     s.add_argument("--quick", action="store_true", help="fewer seeds")
     s.add_argument("--out", default="benchmarks/results", help="folder of the results")

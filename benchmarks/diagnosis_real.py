@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import Target, machine, print_targets, real_cases, save_figure
+from .common import Target, machine, print_targets, real_cases, real_dir, save_figure
 
 FILES = ("RiverPro_test01.PD0", "winriver01.PD0", "winriver02_transect.PD0")
 NAVIGATIONS = ("knots", "random_walk")
@@ -45,6 +45,52 @@ def bench_diagnosis(quick: bool) -> dict:
                       f"gap {r['gap']:7.3f} z {r['gap_z']:8.1f}  {r['seconds']:5.1f} s", flush=True)
     return {"machine": machine(), "rows": rows, "missing": missing, "summary": _summary(rows),
             "speed": [] if quick else [long_transect_speed()]}
+
+
+SURVEY_FILE = "winriver02_transect.PD0"
+SURVEY_WINDOWS_S = ((None, 230.0), (230.0, None))  # the README's survey: the transect's two halves as two runs
+
+
+def bench_diagnosis_survey(quick: bool) -> dict:
+    """``adcpdyn bench diagnosis-survey``: a real survey, the README's (winriver02 cut at 230 s into two
+    runs), calibrated jointly on itself and put through ``api.field_selftest`` as one survey (each error
+    in both runs, the bed one velocity across the survey's mean course), on the random-walk base. The
+    rows and summary are :func:`bench_diagnosis`'s, so its printer, table and limits paragraph serve."""
+    from .. import api
+    from ..estimators.diagnosis.field_errors import FIELD_ERRORS, survey_course
+
+    rows, missing, survey = [], [], {}
+    path = real_dir() / SURVEY_FILE
+    if not path.exists():
+        missing.append(str(path))
+    else:
+        stem = SURVEY_FILE.split(".")[0]
+        cases = [api.import_file(path, start_s=a, end_s=b, name=f"{stem}_{k + 1}").case
+                 for k, (a, b) in enumerate(SURVEY_WINDOWS_S)]
+        label = f"{stem} survey ({' + '.join(f'{a or 0:g}-{b:g} s' if b else f'{a:g} s-end' for a, b in SURVEY_WINDOWS_S)})"
+        survey = {"file": SURVEY_FILE, "label": label, "windows_s": [list(w) for w in SURVEY_WINDOWS_S],
+                  "pings": [c.pings.n for c in cases],
+                  "courses_deg": [float(np.degrees(survey_course(c))) for c in cases]}
+        sizes = {e: (spec[2][-1:] if quick else spec[2]) for e, spec in FIELD_ERRORS.items()}
+        tic = time.perf_counter()
+        calibration = api.calibrate(cases, n_starts=8)
+        calib_s = time.perf_counter() - tic
+        res = api.field_selftest(cases, calibration, navigation="random_walk", sizes=sizes)
+        for r in res["rows"]:
+            rows.append({"file": label, "pings": sum(survey["pings"]), "navigation": "random_walk", "calibration_s": calib_s,
+                         **{k: v for k, v in r.items() if k != "statement"}})
+            print(f"{'survey':>26s} {r['error']:>22s} {r['size']:6.2f} {'random_walk':>11s} -> {r['verdict']:<28s} "
+                  f"gap {r['gap']:7.3f} z {r['gap_z']:8.1f}  {r['seconds']:5.1f} s", flush=True)
+    return {"machine": machine(), "rows": rows, "missing": missing, "summary": _summary(rows), "speed": [],
+            "survey": survey}
+
+
+def print_diagnosis_survey(res: dict) -> None:
+    sv = res.get("survey") or {}
+    if sv:
+        print(f"\na real survey: {sv['label']}, {' + '.join(map(str, sv['pings']))} pings, courses over ground "
+              + ", ".join(f"{c:.1f}" for c in sv["courses_deg"]) + " deg; calibrated jointly on itself, diagnosed jointly")
+    print_diagnosis(res)
 
 
 LONG_TRANSECT_S = 1950.0  # river_survey at 0.5-0.8 s per ping: about 3000 pings

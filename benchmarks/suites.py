@@ -16,8 +16,8 @@ from ..models.rotations import course_difference_rad
 from .common import machine as _machine
 from .common import marked_span, replace_marked_block, save_figure, write_json, write_text
 
-SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis", "compliance",
-          "navigation")
+SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "survey", "surveyday", "diagnosis", "diagnosis-survey",
+          "compliance", "navigation")
 
 
 def _calibrate(case, **kw):
@@ -352,6 +352,10 @@ def _suite(suite: str, quick: bool):
         from .diagnosis_real import bench_diagnosis, figure_diagnosis, print_diagnosis
 
         return bench_diagnosis(quick), print_diagnosis, figure_diagnosis
+    if suite == "diagnosis-survey":
+        from .diagnosis_real import bench_diagnosis_survey, figure_diagnosis, print_diagnosis_survey
+
+        return bench_diagnosis_survey(quick), print_diagnosis_survey, figure_diagnosis
     if suite == "navigation":
         from .navigation_real import bench_navigation, figure_navigation, print_navigation
 

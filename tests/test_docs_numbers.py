@@ -33,6 +33,7 @@ def _missing(table: str, page: str, skip=lambda line: False) -> list:
 
 
 @pytest.mark.parametrize("result, module, page", [("diagnosis_random_walk.json", "diagnosis_real", "docs/diagnosis.md"),
+                                                  ("diagnosis-survey.json", "diagnosis_real", "docs/diagnosis.md"),
                                                   ("navigation.json", "navigation_real", "docs/calibration.md")])
 def test_markdown_tables_of_the_benches_are_in_their_pages(result, module, page):
     import importlib
@@ -41,11 +42,26 @@ def test_markdown_tables_of_the_benches_are_in_their_pages(result, module, page)
     assert _missing(render(_result(result)), page) == []
 
 
-def test_diagnosis_limits_paragraph_is_the_committed_run():
-    """docs/diagnosis.md's paragraph of the real files' detection limits and misses, printed by the bench."""
+@pytest.mark.parametrize("result", ["diagnosis_random_walk.json", "diagnosis-survey.json"])
+def test_diagnosis_limits_paragraph_is_the_committed_run(result):
+    """docs/diagnosis.md's paragraphs of the real files' (and the real survey's) detection limits and
+    misses, printed by the bench."""
     from adcpdyn.benchmarks.diagnosis_real import limits_paragraph
 
-    assert limits_paragraph(_result("diagnosis_random_walk.json")) in (ROOT / "docs" / "diagnosis.md").read_text()
+    assert limits_paragraph(_result(result)) in (ROOT / "docs" / "diagnosis.md").read_text()
+
+
+def test_real_survey_paragraph_reads_the_committed_run():
+    """The survey's figures in docs/diagnosis.md's prose, formatted from its committed run."""
+    res = _result("diagnosis-survey.json")
+    s, sv = res["summary"]["random_walk"], res["survey"]
+    page = " ".join((ROOT / "docs" / "diagnosis.md").read_text().split())
+    hits = sum(r["hit"] for r in res["rows"] if r["error"] != "clean")
+    assert (f"top-1 {hits} of {s['n_injected']} ({100 * s['top1']:.0f} %), {round(s['top1_detectable'] * s['n_detectable'])} "
+            f"of the {s['n_detectable']} not under the survey's limits ({100 * s['top1_detectable']:.0f} %)") in page
+    assert f"({' + '.join(map(str, sv['pings']))} pings; courses over ground " \
+           f"{sv['courses_deg'][0]:.1f} and {sv['courses_deg'][1]:.1f} deg" in page
+    assert f"{res['suite_wall_s']:.0f} s; `benchmarks/results/diagnosis-survey.json`" in page
 
 
 @pytest.mark.parametrize("result", ["diagnose_selftest.json", "diagnose_selftest_calibrated.json"])
@@ -90,7 +106,12 @@ def test_readme_measured_table_reads_the_committed_runs():
     nav = _result("navigation.json")
     rp = {r["navigation"]: r for r in nav["files"] if r["file"] == "RiverPro_test01.PD0"}
     survey = {r["navigation"]: r for r in nav["survey"]}
-    for figure in (f"<= 300 pings: {short:.1f} s at most; a {diag['speed'][0]['pings']}-ping simulated one: "
+    real_survey = _result("diagnosis-survey.json")
+    rs = real_survey["summary"]["random_walk"]
+    for figure in (f"{round(rs['top1'] * rs['n_injected'])} of {rs['n_injected']} named first ({100 * rs['top1']:.0f} %); "
+                   f"{round(rs['top1_detectable'] * rs['n_detectable'])} of the {rs['n_detectable']} above the survey's "
+                   "detection limits",
+                   f"<= 300 pings: {short:.1f} s at most; a {diag['speed'][0]['pings']}-ping simulated one: "
                    f"{diag['speed'][0]['seconds']:.1f} s",
                    f"{hits} of {s['n_injected']} named first ({100 * s['top1']:.0f} %); {detectable} of the "
                    f"{s['n_detectable']} above their file's detection limit",
@@ -157,6 +178,9 @@ def test_status_page_figures_read_the_committed_runs():
     """docs/status.md's measured figures, formatted from the committed JSON (a rerun that moves them fails here
     until the page is rewritten)."""
     status = (ROOT / "docs" / "status.md").read_text()
+    rs = _result("diagnosis-survey.json")["summary"]["random_walk"]
+    assert (f"{round(rs['top1'] * rs['n_injected'])} of {rs['n_injected']} named first ({100 * rs['top1']:.0f} %), "
+            f"{round(rs['top1_detectable'] * rs['n_detectable'])} of the {rs['n_detectable']}\n  above its limits") in status
     diag = _result("diagnosis_random_walk.json")
     s = diag["summary"]["random_walk"]
     short = max(r["seconds"] for r in diag["rows"] if r["pings"] <= 300)

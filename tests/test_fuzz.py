@@ -80,6 +80,7 @@ def test_damaged_instrument_files_are_read_or_refused_in_one_line(fuzz, capfd):
     (["import", "{case}", "--start", "nan", "--out", "{out}/i.h5"], "--start"),
     (["diagnose", "{case}"], "--out"),
     (["diagnose", "--selftest", "0"], "--selftest"),
+    (["diagnose", "{case}", "{case}", "--field-selftest", "--out", "{out}/s.json"], "--joint"),
     (["info"], "case"),
     (["frobnicate"], "command"),
 ])

@@ -332,6 +332,29 @@ def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     assert main(["diagnose", str(tmp_path / "x.h5"), "--field-selftest"]) == 2  # one line: expects --out
 
 
+@pytest.mark.slow  # a survey's field self-test: `make test-slow`, CI's second step
+def test_field_selftest_of_a_survey_writes_one_error_into_every_run():
+    """Two transects of a river survey (there and back), calibrated jointly: each field error is
+    written into both runs as one boat on one river meets it (the bed one velocity across the
+    survey's mean course, the compass offset the same turn of every heading) and the survey is
+    diagnosed jointly: the compass offset and the bed, which one course confounds, are each named."""
+    from adcpdyn import api
+    from adcpdyn.cases.survey import simulate_survey
+    from adcpdyn.estimators.diagnosis.field_errors import inject_survey, survey_course
+
+    cases = simulate_survey("river_survey", 2, 5, compass_rad=(0.0, 0.0, 0.0), bed_speed_m_s=0.0)
+    bed = inject_survey(cases, "moving_bed_m_s", 0.2)
+    added = [b.reference.velocity_m_s - c.reference.velocity_m_s for b, c in zip(bed, cases)]
+    course = survey_course(cases)
+    np.testing.assert_allclose(added[0], added[1])
+    np.testing.assert_allclose(added[0][0], 0.2 * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0]))
+    res = api.field_selftest(cases, None, effects=["compass_offset", "moving_bed"],
+                             sizes={"compass_offset_deg": [3.0], "moving_bed_m_s": [0.2]})
+    assert res["case"] == "+".join(c.name for c in cases) and "jointly" in res["notes"][-1]
+    assert [(r["error"], r["verdict"]) for r in res["rows"]] == [
+        ("clean", "none"), ("compass_offset_deg", "compass_offset"), ("moving_bed_m_s", "moving_bed")]
+
+
 @pytest.mark.slow  # 13 s: `make test-slow`, CI's second step
 def test_field_selftest_diagnoses_on_top_of_the_files_own_effects():
     """A file that carries an effect of its own (here attitude samples stamped 0.5 s late) names it on

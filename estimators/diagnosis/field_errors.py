@@ -57,33 +57,46 @@ def detection_limit(error: str, limits: dict) -> float | None:
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 
 
-def shift_signature(case: Case, error: str) -> dict:
-    """How one unit of ``error`` (its unit) as :func:`inject` writes it moves its catalog effect's
-    unknowns (unknown -> change per unit): a compass offset only the constant term A (a compass
-    deviation's B and C stay), a bed across the mean course its north and east components."""
+def shift_signature(cases, error: str) -> dict:
+    """How one unit of ``error`` (its unit) as :func:`inject_survey` writes it into ``cases`` (one
+    run or a survey's) moves its catalog effect's unknowns (unknown -> change per unit): a compass
+    offset only the constant term A (a compass deviation's B and C stay), a bed across the survey's
+    mean course its north and east components."""
     if error not in ERROR_UNKNOWNS:
         return {}
     names, per_unit, _ = ERROR_UNKNOWNS[error]
-    if per_unit is None:  # the bed: across the run's mean course
-        course = _mean_course(case)
+    if per_unit is None:  # the bed: across the survey's mean course
+        course = survey_course(cases)
         per_unit = (float(np.cos(course - np.pi / 2)), float(np.sin(course - np.pi / 2)))
     return dict(zip(names, per_unit))
 
 
-def _mean_course(case: Case) -> float:
-    v = case.reference.velocity_m_s
+def survey_course(cases) -> float:
+    """The mean course over ground of one run or of a survey's runs together (rad from north):
+    the direction of the mean of every reference velocity."""
+    cases = [cases] if isinstance(cases, Case) else list(cases)
+    v = np.vstack([c.reference.velocity_m_s for c in cases])
     return float(np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0])))
 
 
-def inject(case: Case, error: str, size: float) -> Case:
+def inject_survey(cases, error: str, size: float) -> list:
+    """Every run of a survey (one boat, one river) with the same field error of ``size``
+    (:func:`inject`): one compass, one clock, one sound speed, one bed, which moves across the
+    survey's mean course in every run."""
+    cases = [cases] if isinstance(cases, Case) else list(cases)
+    course = survey_course(cases) if error == "moving_bed_m_s" else None
+    return [inject(c, error, size, course_rad=course) for c in cases]
+
+
+def inject(case: Case, error: str, size: float, course_rad: float | None = None) -> Case:
     """``case`` with one field error of ``size`` (units of :data:`FIELD_ERRORS`) written into what
     the instruments recorded.
 
     - compass_offset_deg: every heading sample turned by ``size`` (true = read - size);
     - attitude_latency_s: attitude samples stamped ``size`` late (the sample stamped t holds t - size);
     - reference_latency_s: reference velocities stamped ``size`` late;
-    - moving_bed_m_s: a bed moving at ``size`` across the mean course (to its left): the bottom
-      track sees v - u, so the reference, which sees v, gets + u;
+    - moving_bed_m_s: a bed moving at ``size`` across the mean course (to its left; ``course_rad``,
+      default the run's own): the bottom track sees v - u, so the reference, which sees v, gets + u;
     - sound_speed_relative: radials and slant ranges scaled by 1 + size (the instrument's sound
       speed off by that fraction);
     - tilt_lowpass_s: pitch and roll samples read through a first-order low-pass of time constant
@@ -118,7 +131,7 @@ def inject(case: Case, error: str, size: float) -> Case:
     if error == "reference_latency_s":
         return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
-    course = _mean_course(case)
+    course = survey_course(case) if course_rad is None else course_rad
     u = size * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0])
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
 

@@ -2,6 +2,8 @@
 recorded channels (:mod:`.field_errors`), on the file's own motion and noise, and diagnosed blind
 with the file's own calibration. What it reports is what this file can detect: per error the
 share named (top-1), the shrink found for the right effect, and the smallest size detected.
+A survey (several runs of one boat) is tested the same way, jointly: the same error written into
+every run (one compass, one clock, one bed), diagnosed with the survey's calibration.
 """
 
 from __future__ import annotations
@@ -16,14 +18,15 @@ from ..calibration.record import CalibrationRecord
 from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, diagnose
 from ..measurement_model import has_moving_reference
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject, shift_signature
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey, shift_signature
 from .signal_limit import own_delay_profile, signal_limit
 
 
-def field_selftest(case: Case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
+def field_selftest(case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
                    sizes: dict | None = None, progress=None) -> dict:
-    """Diagnose ``case`` clean and with every field error of ``sizes`` ({error: sizes}, default
-    the field's typical ones, :data:`.field_errors.FIELD_ERRORS`) injected, blind.
+    """Diagnose ``case`` (a run, or a survey's runs jointly) clean and with every field error of
+    ``sizes`` ({error: sizes}, default the field's typical ones, :data:`.field_errors.FIELD_ERRORS`)
+    injected, blind.
 
     Returns ``{"rows": [...], "summary": {...}}``: one row per run (error, size, verdict, whether the
     error's effect was named first, the shrink and estimate reported for that effect, the gap
@@ -31,12 +34,14 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
     run's verdict (anything named there is a false alarm or the file's own effect).
     """
     sizes = sizes or {e: spec[2] for e, spec in FIELD_ERRORS.items()}
-    moving = has_moving_reference(case)
+    runs = [case] if isinstance(case, Case) else list(case)
+    case = runs[0] if len(runs) == 1 else runs  # what diagnose, the limits and the signatures take
+    moving = all(has_moving_reference(c) for c in runs)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
     rows, own, own_values, limits, beyond, reasons = [], (), {}, {}, {}, {}
     for error, size in trials:
-        run = case if error == "clean" else inject(case, error, size)
+        run = case if error == "clean" else inject_survey(runs, error, size)
         tic = time.perf_counter()
         # the clean file's own effects are the file's: every injected error is diagnosed on top of them
         r = diagnose(run, dataclasses.replace(config, given=own) if own else config, calibration=calibration)
@@ -95,11 +100,11 @@ def field_selftest(case: Case, calibration: CalibrationRecord | None, config: Di
         rows.append(row)
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
-    return {"case": case.name, "rows": rows, "summary": summarise(rows), "navigation": navigation,
+    return {"case": "+".join(c.name for c in runs), "rows": rows, "summary": summarise(rows), "navigation": navigation,
             "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
 
 
-def _own_effects(case: Case, config: DiagnosisConfig, calibration, first) -> tuple:
+def _own_effects(case, config: DiagnosisConfig, calibration, first) -> tuple:
     """The clean file's own effects and their joint estimates (effect -> {"params", "params_se"}): what
     its diagnosis names, then what it names on top of those given, until nothing more (at most
     ``config.max_effects``). The forward selection's later rounds judge against a held-out gap the
@@ -115,12 +120,11 @@ def _own_effects(case: Case, config: DiagnosisConfig, calibration, first) -> tup
     if given != own:
         r = diagnose(case, dataclasses.replace(config, given=own), calibration=calibration)
     values = {}
-    for name, v in r.given.items():
-        key = name.split("/")[-1]
-        entry = values.setdefault(key.split(".")[0], {"params": {}, "params_se": {}})
-        entry["params"][key], entry["params_se"][key] = v["value"], v["se"]
+    for name, v in r.given.items():  # full names: a survey's per-run effects (its beds) one per run
+        entry = values.setdefault(name.split("/")[-1].split(".")[0], {"params": {}, "params_se": {}})
+        entry["params"][name], entry["params_se"][name] = v["value"], v["se"]
     for entry in values.values():
-        full = [n for n in r.given if n.split("/")[-1] in entry["params"]]
+        full = list(entry["params"])
         entry["covariance"] = _covariance_of(r.given_covariance, full, [r.given[n]["se"] for n in full])
     return own, values
 
@@ -220,8 +224,8 @@ def _moved(given: dict, clean: dict, signature: dict, covariance: dict | None = 
     and C stand in for on one course does not hide it); named when that size is beyond MOVED_Z of
     its standard errors the error's way. Without a signature, the largest single shift in its own
     standard errors (either way) is reported and nothing is named."""
-    names = [n for n in given if n.split("/")[-1] in clean["params"]]
-    keys = [n.split("/")[-1] for n in names]
+    names = [n for n in given if n in clean["params"]]
+    keys = names
     d = np.array([given[n]["value"] - clean["params"][k] for n, k in zip(names, keys)])
     C = _covariance_of(covariance, names, [given[n]["se"] for n in names]) + _clean_covariance(clean, keys)
     e = _signature_vector(signature, keys)

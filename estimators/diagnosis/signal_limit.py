@@ -12,10 +12,9 @@ import scipy.sparse as sp
 
 from concurrent.futures import ThreadPoolExecutor
 
-from ...cases.case import Case
 from ...models.effects import get_effect
 from .diagnose import DiagnosisConfig, _terms, applicable, base_from, fit_at_delay, hac_of_columns
-from .field_errors import FIELD_ERRORS, inject
+from .field_errors import FIELD_ERRORS, inject_survey
 from .model import Fit, GapModel, free_jacobian
 from ..statistics.normal_equations import as_sparse, inverse_columns
 
@@ -23,15 +22,16 @@ SEARCH = (1.0 / 16.0, 4.0)  # sizes searched: from the smallest typical one over
 BISECTIONS = 7  # the search spans about 7 octaves: a limit to about 5 %
 
 
-def signal_statistic(model: GapModel, fit: Fit, case: Case, error: str, size: float, config: DiagnosisConfig,
+def signal_statistic(model: GapModel, fit: Fit, case, error: str, size: float, config: DiagnosisConfig,
                      calibration=None) -> tuple | None:
-    """(noncentrality, colour inflation) of ``error`` at ``size`` written into ``case``, on the base
+    """(noncentrality, colour inflation) of ``error`` at ``size`` written into ``case`` (a run, or
+    a survey's runs: the same error in each, :func:`.field_errors.inject_survey`), on the base
     ``model`` fitted as ``fit``: lambda = d'(I - H)d, d the weighted residuals' change at the fit's
     unknowns, H the hat matrix of its free unknowns (lambda is 2 x the log-likelihood a model that
     reproduced the error exactly would gain, to first order); the inflation is the HAC variance of
     that model's size over its white one. None when the injected case makes a different model
     (another attitude source, other rows)."""
-    other = GapModel(base_from([inject(case, error, size)], config, calibration), solver=config.solver)
+    other = GapModel(base_from(inject_survey(case, error, size), config, calibration), solver=config.solver)
     if other.names != model.names or other.mask.shape != model.mask.shape:
         return None
     z, w = fit.x / fit.scale, model.weights(fit.sigma)
@@ -56,7 +56,7 @@ def selection_bar(model: GapModel, config: DiagnosisConfig, k: int) -> float:
     return k * np.log(int((model.mask > 0).sum())) + config.bic_margin
 
 
-def signal_limit(model: GapModel, fit: Fit, case: Case, error: str, config: DiagnosisConfig, calibration=None) -> dict | None:
+def signal_limit(model: GapModel, fit: Fit, case, error: str, config: DiagnosisConfig, calibration=None) -> dict | None:
     """The smallest size of ``error`` whose signature passes the selection's coloured BIC bar
     (lambda / inflation > k log n + margin, k the catalog effect's unknowns), by bisection in log
     size over :data:`SEARCH` around the error's typical sizes: {"size", "beyond": True when not
