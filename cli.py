@@ -600,18 +600,11 @@ def cmd_diagnose(args) -> int:
         return _diagnose_selftest(args)
     if args.field_selftest:
         return _diagnose_field_selftest(args)
-    if not args.case or not args.out:
-        raise ValueError("diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)")
     from .api import diagnose
-    from .cases.atomic import check_output_file
-    from .cases.collect import collect_case_paths, is_many
     from .estimators.diagnosis.report import terminal_text, write_report
 
-    if is_many(args.case) and not args.joint:
-        raise ValueError(f"diagnose: {' '.join(args.case)}: several cases (a folder, a glob or more than one file): add "
-                         "--joint to diagnose them together (one boat, shared and per-run effects)")
-    paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
-    check_output_file(args.out, *paths, args.calibration)
+    paths = _diagnosis_paths(args, "diagnose: expected CASE.h5 and --out DIAG.json (or --selftest N)",
+                             "diagnose them together (one boat, shared and per-run effects)")
     progress = _DiagnosisProgress("diagnose", len(paths))
     result = diagnose(paths if args.joint else paths[0], args.calibration, effects=args.effects, attitude=args.attitude,
                       navigation=args.navigation, given=args.given, progress=progress.fitted_model,
@@ -625,20 +618,28 @@ def cmd_diagnose(args) -> int:
     return 0 if result.base["success"] else 1
 
 
-def _diagnose_field_selftest(args) -> int:
-    from .api import field_selftest
+def _diagnosis_paths(args, usage: str, joint: str) -> list:
+    """The case paths a diagnosis reads (several only with --joint: ``joint`` says what for), its
+    --out checked against them; ``usage`` is the one-line error without a case or --out."""
     from .cases.atomic import check_output_file
-    from .estimators.diagnosis.field_selftest import format_field_selftest
-
     from .cases.collect import collect_case_paths, is_many
 
     if not args.case or not args.out:
-        raise ValueError("diagnose: --field-selftest expects CASE.h5 (several with --joint: a survey) and --out SELFTEST.json")
+        raise ValueError(usage)
     if is_many(args.case) and not args.joint:
         raise ValueError(f"diagnose: {' '.join(args.case)}: several cases (a folder, a glob or more than one file): add "
-                         "--joint to self-test them as one survey")
+                         f"--joint to {joint}")
     paths = collect_case_paths(args.case) if args.joint else [args.case[0]]
     check_output_file(args.out, *paths, args.calibration)
+    return paths
+
+
+def _diagnose_field_selftest(args) -> int:
+    from .api import field_selftest
+    from .estimators.diagnosis.field_selftest import format_field_selftest
+
+    paths = _diagnosis_paths(args, "diagnose: --field-selftest expects CASE.h5 (several with --joint: a survey) and "
+                             "--out SELFTEST.json", "self-test them as one survey")
     res = field_selftest(paths if args.joint else paths[0], args.calibration, navigation=args.navigation, effects=args.effects,
                          accept_other_instrument=args.accept_other_instrument,
                          attitude=args.attitude, out=args.out, fmt=args.format,
