@@ -22,7 +22,7 @@ test: $(STAMP)
 
 # the tests marked slow (not in `make test`, which stays under 3 minutes; .ci/run runs them as its second
 # step): the fuzz harness's case files through every verb and diagnose on every valid variant, the real
-# transect's reference latency, the field self-tests and the other calls of 8 s and more
+# transect's reference latency, the field self-tests and the other calls of 6 s and more
 test-slow: $(STAMP)
 	$(PY) -m pytest -n auto --dist worksteal -m slow
 

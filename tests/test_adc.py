@@ -143,6 +143,7 @@ def test_compiled_rootfinder_equals_interpreted(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []  # the compiler's files stay out of the working folder
 
 
+@pytest.mark.slow  # 7 s: `make test-slow`, CI's second step
 def test_exact_travel_time_reproduces_the_simulator_in_deep_water():
     """The oracle with the travel time solved for the moving transducer against the simulator's
     own fixed-point echoes (noise-free deep_ocean): the first-order model leaves ~1e-5 m/s."""

@@ -68,6 +68,7 @@ def test_batch_out_must_be_a_folder(three_cases, tmp_path, capsys):
     assert "--out" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # 7 s: `make test-slow`, CI's second step
 def test_joint_calibration_starts_on_a_local_cluster_agree_with_this_process(tmp_path, capsys):
     """`calibrate --joint --scheduler local`: every start solved on a Dask worker that built the problem
     itself; the combined multistart is the one solved here, start by start (same objectives, same best,

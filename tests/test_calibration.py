@@ -219,6 +219,7 @@ def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
     assert r.to_dict()["installation_ypr_rad"][1] is None  # null in CALIB.json
 
 
+@pytest.mark.slow  # 7 s: `make test-slow`, CI's second step
 def test_random_walk_calibration_finds_the_installation_with_a_velocity_per_ping(lake_case):
     """navigation random_walk (a velocity at every ping, its intensity and the noise levels by
     variance components): the installation angles within 3 SE of truth on the sensor's samples, a

@@ -103,6 +103,7 @@ def test_every_builtin_scenario_simulates_reads_and_corrects(tmp_path, scenario)
     assert main(["correct", str(case), "--out", str(tmp_path / "o.h5")]) == 0
 
 
+@pytest.mark.slow  # 7 s: `make test-slow`, CI's second step
 def test_correct_oracle_with_exact_timing_and_a_clear_error_for_the_closed_form(tmp_path, capsys):
     case = tmp_path / "d.h5"
     assert main(["simulate", "deep_ocean", "--seed", "1", "--out", str(case)]) == 0

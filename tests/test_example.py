@@ -17,6 +17,7 @@ SCRIPT = ROOT / "docs" / "examples" / "real_file_to_netcdf.py"
 REAL = Path(os.environ.get("ADCPDYN_REAL_DATA", ROOT / ".." / "shared" / "data" / "real"))
 
 
+@pytest.mark.slow  # 8 s: `make test-slow`, CI's second step
 def test_real_file_to_netcdf_example(tmp_path):
     src = REAL / "RiverPro_test01.PD0"
     if not src.is_file():

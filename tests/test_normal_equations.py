@@ -120,6 +120,7 @@ def test_leave_out_predictions_equal_refits_without_the_fold():
         np.testing.assert_allclose(pred[fold == k], refit_without(Jd, y, fold != k), atol=1e-8)
 
 
+@pytest.mark.slow  # 7 s: `make test-slow`, CI's second step
 def test_variance_components_recover_a_random_walk_and_its_noise():
     """A velocity per ping, a random walk of intensity sqrt(q) = 0.05 m/s/sqrt(s), seen at every ping
     with noise 0.02 m/s (as the bottom track) and every fifth with 0.1 m/s (as the reference):

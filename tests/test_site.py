@@ -39,6 +39,7 @@ def test_sign_east_positive():
     assert magnetic_declination_rad(44.92, -66.99, when) < -np.deg2rad(10)
 
 
+@pytest.mark.slow  # 7 s: `make test-slow`, CI's second step
 def test_finite_everywhere_and_periodic_in_longitude():
     when = dt.datetime(2015, 3, 1)
     for lat in np.linspace(-89.5, 89.5, 13):
