@@ -921,7 +921,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="what this file can detect: the field's errors (compass offset, attitude and reference latency, "
                         "moving bed, sound speed, tilt low-pass, heave) injected at typical sizes into its recorded "
                         "channels, each diagnosed blind with its calibration (--calibration, else calibrated on itself); "
-                        "with --joint a survey's runs, each error in every run, diagnosed jointly")
+                        "with --effects only the errors those can name; with --joint a survey's runs, each error in "
+                        "every run, diagnosed jointly")
     s.add_argument("--selftest", type=_count, metavar="N", help="blind self-test on N simulated cases")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the self-test draws")
     s.add_argument("--selftest-calibrated", action="store_true",

@@ -303,6 +303,18 @@ def test_lowpass_of_samples_matches_the_closed_form_step_and_ramp_responses():
     np.testing.assert_allclose(lowpass(t, np.full(t.size, 0.3), tau), 0.3)
 
 
+def test_field_selftest_injects_only_the_errors_its_candidates_can_name():
+    """By default every field error at its typical sizes; with the candidates restricted (--effects),
+    only the errors one of them can name: an error no candidate could name is not counted a miss."""
+    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig
+    from adcpdyn.estimators.diagnosis.field_errors import FIELD_ERRORS
+    from adcpdyn.estimators.diagnosis.field_selftest import default_sizes
+
+    assert default_sizes(DiagnosisConfig()) == {e: spec[2] for e, spec in FIELD_ERRORS.items()}
+    assert default_sizes(DiagnosisConfig(effects=("moving_bed", "heave", "surge"))) == {
+        "moving_bed_m_s": FIELD_ERRORS["moving_bed_m_s"][2], "heave_m_s": FIELD_ERRORS["heave_m_s"][2]}
+
+
 @pytest.mark.slow  # 13 s: `make test-slow`, CI's second step
 def test_field_selftest_reports_what_a_file_can_detect(tmp_path):
     """A clean run and an injected bed across the course on the file's own motion, diagnosed blind:

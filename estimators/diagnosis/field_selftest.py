@@ -25,15 +25,15 @@ from .signal_limit import own_delay_profile, signal_limit
 def field_selftest(case, calibration: CalibrationRecord | None, config: DiagnosisConfig = DiagnosisConfig(),
                    sizes: dict | None = None, progress=None) -> dict:
     """Diagnose ``case`` (a run, or a survey's runs jointly) clean and with every field error of
-    ``sizes`` ({error: sizes}, default the field's typical ones, :data:`.field_errors.FIELD_ERRORS`)
-    injected, blind.
+    ``sizes`` ({error: sizes}, default the field's typical ones of the errors ``config.effects``
+    can name, :func:`default_sizes`) injected, blind.
 
     Returns ``{"rows": [...], "summary": {...}}``: one row per run (error, size, verdict, whether the
     error's effect was named first, the shrink and estimate reported for that effect, the gap
     and its z, seconds); the summary per error (top-1, smallest size detected) and the clean
     run's verdict (anything named there is a false alarm or the file's own effect).
     """
-    sizes = sizes or {e: spec[2] for e, spec in FIELD_ERRORS.items()}
+    sizes = sizes or default_sizes(config)
     runs = [case] if isinstance(case, Case) else list(case)
     case = runs[0] if len(runs) == 1 else runs  # what diagnose, the limits and the signatures take
     moving = all(has_moving_reference(c) for c in runs)
@@ -102,6 +102,13 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
             progress(f"{error} {size:g}: {r.verdict}")
     return {"case": "+".join(c.name for c in runs), "rows": rows, "summary": summarise(rows), "navigation": navigation,
             "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+
+
+def default_sizes(config: DiagnosisConfig) -> dict:
+    """The field's typical sizes ({error: sizes}, :data:`.field_errors.FIELD_ERRORS`) of the errors
+    whose catalog effect the diagnosis tries (``config.effects``): an error no candidate could name
+    is not injected to be counted a miss."""
+    return {e: spec[2] for e, spec in FIELD_ERRORS.items() if spec[0] in config.effects}
 
 
 def _own_effects(case, config: DiagnosisConfig, calibration, first) -> tuple:
