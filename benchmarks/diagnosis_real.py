@@ -28,10 +28,9 @@ def bench_diagnosis(quick: bool) -> dict:
     """Every file through ``api.field_selftest`` (the same code as ``diagnose --field-selftest``),
     calibrated once on itself, for each base."""
     from .. import api
-    from ..estimators.diagnosis.field_errors import FIELD_ERRORS
 
     rows, missing = [], []
-    sizes = {e: (spec[2][-1:] if quick else spec[2]) for e, spec in FIELD_ERRORS.items()}
+    sizes = _sizes(quick)
     for name, path, case in real_cases(FILES[:1] if quick else FILES, missing):
         tic = time.perf_counter()
         calibration = api.calibrate(case, n_starts=8)
@@ -47,6 +46,13 @@ def bench_diagnosis(quick: bool) -> dict:
             "speed": [] if quick else [long_transect_speed()]}
 
 
+def _sizes(quick: bool) -> dict:
+    """The field errors' typical sizes, the largest alone in quick mode."""
+    from ..estimators.diagnosis.field_errors import FIELD_ERRORS
+
+    return {e: (spec[2][-1:] if quick else spec[2]) for e, spec in FIELD_ERRORS.items()}
+
+
 SURVEY_FILE = "winriver02_transect.PD0"
 SURVEY_WINDOWS_S = ((None, 230.0), (230.0, None))  # the README's survey: the transect's two halves as two runs
 
@@ -57,7 +63,7 @@ def bench_diagnosis_survey(quick: bool) -> dict:
     in both runs, the bed one velocity across the survey's mean course), on the random-walk base. The
     rows and summary are :func:`bench_diagnosis`'s, so its printer, table and limits paragraph serve."""
     from .. import api
-    from ..estimators.diagnosis.field_errors import FIELD_ERRORS, survey_course
+    from ..estimators.diagnosis.field_errors import survey_course
 
     rows, missing, survey = [], [], {}
     path = real_dir() / SURVEY_FILE
@@ -71,7 +77,7 @@ def bench_diagnosis_survey(quick: bool) -> dict:
         survey = {"file": SURVEY_FILE, "label": label, "windows_s": [list(w) for w in SURVEY_WINDOWS_S],
                   "pings": [c.pings.n for c in cases],
                   "courses_deg": [float(np.degrees(survey_course(c))) for c in cases]}
-        sizes = {e: (spec[2][-1:] if quick else spec[2]) for e, spec in FIELD_ERRORS.items()}
+        sizes = _sizes(quick)
         tic = time.perf_counter()
         calibration = api.calibrate(cases, n_starts=8)
         calib_s = time.perf_counter() - tic

@@ -66,9 +66,14 @@ def shift_signature(cases, error: str) -> dict:
         return {}
     names, per_unit, _ = ERROR_UNKNOWNS[error]
     if per_unit is None:  # the bed: across the survey's mean course
-        course = survey_course(cases)
-        per_unit = (float(np.cos(course - np.pi / 2)), float(np.sin(course - np.pi / 2)))
+        per_unit = tuple(float(c) for c in _across(survey_course(cases)))
     return dict(zip(names, per_unit))
+
+
+def _across(course_rad: float) -> np.ndarray:
+    """The horizontal unit vector (north, east) across ``course_rad`` to its left: where an
+    injected bed moves."""
+    return np.array([np.cos(course_rad - np.pi / 2), np.sin(course_rad - np.pi / 2)])
 
 
 def survey_course(cases) -> float:
@@ -131,8 +136,7 @@ def inject(case: Case, error: str, size: float, course_rad: float | None = None)
     if error == "reference_latency_s":
         return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
-    course = survey_course(case) if course_rad is None else course_rad
-    u = size * np.array([np.cos(course - np.pi / 2), np.sin(course - np.pi / 2), 0.0])
+    u = size * np.append(_across(survey_course(case) if course_rad is None else course_rad), 0.0)
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
 
 

@@ -232,10 +232,9 @@ def _moved(given: dict, clean: dict, signature: dict, covariance: dict | None = 
     its standard errors the error's way. Without a signature, the largest single shift in its own
     standard errors (either way) is reported and nothing is named."""
     names = [n for n in given if n in clean["params"]]
-    keys = names
-    d = np.array([given[n]["value"] - clean["params"][k] for n, k in zip(names, keys)])
-    C = _covariance_of(covariance, names, [given[n]["se"] for n in names]) + _clean_covariance(clean, keys)
-    e = _signature_vector(signature, keys)
+    d = np.array([given[n]["value"] - clean["params"][n] for n in names])
+    C = _covariance_of(covariance, names, [given[n]["se"] for n in names]) + _clean_covariance(clean, names)
+    e = _signature_vector(signature, names)
     se = _along(C, e)
     if np.isfinite(se):
         size = float(se ** 2 * (e @ np.linalg.pinv(C) @ d))
@@ -244,7 +243,7 @@ def _moved(given: dict, clean: dict, signature: dict, covariance: dict | None = 
         size, sd = None, np.sqrt(np.maximum(np.diag(C), 0.0))
         z = float(np.max(np.abs(d) / np.where(sd > 0, sd, np.inf), initial=0.0))
     return {"hit": bool(size is not None and z > MOVED_Z), "estimate": {k: v["value"] for k, v in given.items()},
-            "se": {k: v["se"] for k, v in given.items()}, "shift_from_clean": dict(zip(keys, d.tolist())),
+            "se": {k: v["se"] for k, v in given.items()}, "shift_from_clean": dict(zip(names, d.tolist())),
             "shift_z": float(z), "size_estimate": size, "size_se": float(se) if size is not None else None}
 
 
