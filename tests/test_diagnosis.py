@@ -137,6 +137,25 @@ def test_compass_offset_beside_an_estimated_installation_is_named():
     assert r.verdict == "compass_offset"
 
 
+def test_a_compass_error_of_any_angle_is_named_with_its_size():
+    """A wrongly entered heading alignment or declination puts the heading tens of degrees off (a
+    transect of MHKiT's Tanana data reads 45 deg off its GNSS course): the offset's bounds are the
+    circle's, so a 45-deg error since the calibration is named with its size (bounded at 0.5 rad it
+    had stopped at 28.6 deg, the deviation's one-cycle terms taking the rest and being named)."""
+    from adcpdyn import api
+    from adcpdyn.estimators.diagnosis.field_errors import inject
+
+    case = simulate(short_scenario(40.0), seed=5)
+    calibration = as_record(api.calibrate(case, n_starts=4))
+    r = diagnose(inject(case, "compass_offset_deg", -45.0), DiagnosisConfig(effects=("compass_offset", "compass_deviation")),
+                 calibration=calibration)
+    assert r.verdict == "compass_offset"
+    top = next(x for x in r.ranking if x["effect"] == "compass_offset")
+    est, se = top["params"]["compass_offset.A_rad"], top["params_se"]["compass_offset.A_rad"]
+    # within half a degree: the calibration's installation yaw, pinned in the base, is itself ~0.1 deg off
+    assert not top["at_bound"] and 0 < se < np.radians(0.5) and abs(est - np.radians(-45.0)) < np.radians(0.5)
+
+
 def test_effect_free_case_gets_none():
     case = simulate(short_scenario(), seed=7)
     r = diagnose(case, DiagnosisConfig(effects=FEW))

@@ -1,4 +1,5 @@
-"""Heading error of a magnetic compass: A + B sin psi + C cos psi (one-cycle deviation)."""
+"""Heading error of a magnetic compass: A + B sin psi + C cos psi (one-cycle deviation); its
+constant A any angle (as :mod:`.compass_offset`), the one-cycle terms a deviation's size."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ class CompassDeviation(MisreadsHeading):
     name = "compass_deviation"
     description = "heading reads psi + A + B sin psi + C cos psi"
     parameters = (
-        Parameter("A_rad", 0.02, -0.5, 0.5, draw=(1.0 * DEG, 4.0 * DEG)),
+        Parameter("A_rad", 0.02, -np.pi, np.pi, draw=(1.0 * DEG, 4.0 * DEG)),
         Parameter("B_rad", 0.02, -0.5, 0.5, draw=(1.5 * DEG, 4.0 * DEG)),
         Parameter("C_rad", 0.02, -0.5, 0.5, draw=(1.5 * DEG, 4.0 * DEG)),
     )
