@@ -933,8 +933,6 @@ class SurveyModel:
         attitude, bottom-track and reference rows as blocks over their share of s and their knots."""
         if self.effect_terms:
             raise ValueError("jacobian: 'assembled' is for calibrations; a model with effects uses the symbolic one")
-        if any(run.navigation != "knots" for run in self.runs):
-            raise ValueError("jacobian: 'assembled' is for knot navigation; a random-walk one uses the symbolic one")
         shared, index = self.shared_vector()
         shared_z = ca.substitute([shared], *subs)[0]
         u = self.unknowns
@@ -1006,6 +1004,11 @@ class SurveyModel:
                 blocks.append(RowBlock(ca.Function("reference_rows", [d1, v, s], [vs]), data,
                                        offset, velocity_basis=velocity_basis, shared_index=idx, knot_columns=knots_cols))
                 offset += 3 * t_ref.size
+            if run.random_walk:  # the priors, linear in the velocities: increments over sqrt(dt), vertical levels
+                for fun, basis_k in self._walk_rows(run.knots):
+                    blocks.append(RowBlock(fun, np.zeros((1, basis_k.shape[0])), offset, velocity_basis=basis_k,
+                                           shared_index=np.zeros(0, dtype=int), knot_columns=knots_cols))
+                    offset += fun.size1_out(0) * basis_k.shape[0]
         if self.has_prior:
             d, v, s = ca.SX.sym("d", 1), ca.SX.sym("v", 3), ca.SX.sym("s", 2)
             blocks.append(RowBlock(ca.Function("prior_rows", [d, v, s], [s]), np.zeros((1, 1)), offset,
@@ -1015,6 +1018,19 @@ class SurveyModel:
             raise RuntimeError(f"assembled Jacobian: {offset} rows, residuals have {self.raw.shape[0]}")
         return RowJacobian(z, shared_z, blocks, self.raw.shape[0], None, u.scale, threads=threads,
                            compile=self.compiled)
+
+    @staticmethod
+    def _walk_rows(knots: np.ndarray) -> list:
+        """The random-walk prior's rows as (per-row Function of the velocity, velocity basis over the
+        knots): the horizontal increments (V_j+1 - V_j) / sqrt(dt) (north rows, then east), and
+        each knot's vertical velocity, in :meth:`_build_residuals`' order."""
+        d, v, s = ca.SX.sym("d", 1), ca.SX.sym("v", 3), ca.SX.sym("s", 0)
+        K, w = knots.size, 1.0 / np.sqrt(np.diff(knots))
+        j = np.arange(K - 1)
+        increments = sp.csr_matrix((np.concatenate([-w, w]), (np.concatenate([j, j]), np.concatenate([j, j + 1]))),
+                                   shape=(K - 1, K))
+        return [(ca.Function("walk_increment_rows", [d, v, s], [v[:2]]), increments),
+                (ca.Function("walk_vertical_rows", [d, v, s], [v[2]]), sp.identity(K, format="csr"))]
 
     # ------------------------------------------------------------------ starting values
     def initial_x(self, params: list, angles, centre, heading_guess: float = 0.0) -> np.ndarray:

@@ -223,8 +223,7 @@ def test_installation_angle_held_by_its_box_is_reported_as_not_determined():
 def test_random_walk_calibration_finds_the_installation_with_a_velocity_per_ping(lake_case):
     """navigation random_walk (a velocity at every ping, its intensity and the noise levels by
     variance components): the installation angles within 3 SE of truth on the sensor's samples, a
-    walk intensity and vertical level among the noise levels, velocities at the pings; the assembled
-    Jacobian, knots-only, is refused in one line."""
+    walk intensity and vertical level among the noise levels, velocities at the pings."""
     case = lake_case
     r = _quiet_calibrate(case, formulation="minimal", n_starts=2, timing="shallow", attitude="samples",
                          moving_bed="off", navigation="random_walk")
@@ -236,9 +235,6 @@ def test_random_walk_calibration_finds_the_installation_with_a_velocity_per_ping
     np.testing.assert_allclose(r.runs[0].velocity_knots_s, case.pings.time_s)
     auto = CalibrationProblem(case, CalibrationConfig(n_starts=1, timing="shallow", navigation="auto"))
     assert [run.navigation for run in auto.runs] == ["knots"]  # a motion model follows this run's attitude
-    with pytest.raises(ValueError, match=r"CalibrationConfig.jacobian \(--jacobian\): 'assembled' is for knot navigation"):
-        CalibrationProblem(case, CalibrationConfig(n_starts=1, attitude="samples", navigation="random_walk",
-                                                   jacobian="assembled"))
     with pytest.raises(ValueError, match="CalibrationConfig.navigation: expected one of"):
         CalibrationConfig(navigation="spline")
 
@@ -333,12 +329,13 @@ def test_qiao_baseline_finds_installation_yaw():
 
 
 @pytest.mark.parametrize("kind", ["head_sensor_still", "vessel_sensor_moving_deep", "head_sensor_moving",
-                                  "head_sensor_moving_samples"])
+                                  "head_sensor_moving_samples", "head_sensor_moving_walk"])
 def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     """The per-row assembled residual Jacobian (long runs) against casadi.jacobian of the whole
     expanded problem, on each layout of unknowns: still head sensor, vessel sensor with
     velocity knots, GNSS and the deep-water model, head sensor with heading misalignment, and the
-    latter with the beams' attitude from the sensor's samples (per-row attitude data). Three
+    latter with the beams' attitude from the sensor's samples (per-row attitude data), and with a
+    velocity per ping under the random-walk prior (its rows linear in the velocities). Three
     cores and one worker: the assembled problem's per-row Jacobians are split over three threads."""
     from adcpdyn.estimators import measurement_model
     from adcpdyn.estimators.calibration.problem import CalibrationProblem
@@ -356,14 +353,17 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
         sc = dataclasses.replace(sc, platform=dataclasses.replace(sc.platform, mounting=mounting),
                                  run=dataclasses.replace(sc.run, duration_s=30.0))
     case = simulate(sc, seed=2)
-    attitude = "samples" if kind == "head_sensor_moving_samples" else "model"
-    problems = {j: CalibrationProblem(case, CalibrationConfig(n_starts=2, seed=1, jacobian=j, attitude=attitude, workers=1))
+    attitude = "samples" if kind.endswith(("_samples", "_walk")) else "model"
+    navigation = "random_walk" if kind.endswith("_walk") else "knots"
+    problems = {j: CalibrationProblem(case, CalibrationConfig(n_starts=2, seed=1, jacobian=j, attitude=attitude, workers=1,
+                                                              navigation=navigation))
                 for j in ("assembled", "symbolic")}
     assert problems["assembled"].threads == 3 and problems["symbolic"].threads == 1
     if kind == "vessel_sensor_moving_deep":
         assert problems["symbolic"].timing == "deep" and problems["symbolic"].knots is not None
     if kind.startswith("head_sensor_moving"):
         assert problems["symbolic"].head_yaw and problems["symbolic"].sampled == (attitude == "samples")
+        assert problems["assembled"].walk == (navigation == "random_walk") and problems["assembled"].assembled
     z = problems["symbolic"].start_points(2, 1)[1]
     w = problems["symbolic"].weights()
     assembled = problems["assembled"].jacobian_fun(z, w)

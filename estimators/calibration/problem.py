@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 from scipy.stats import qmc
 
 from ...cases.case import Case
@@ -316,10 +317,6 @@ class CalibrationProblem:
                                  config.use_ranges and case.pings.bt_range_m is not None, reason, navigation=navigation))
         self.runs = runs
         self.walk = any(r.random_walk for r in runs)
-        if self.walk and config.jacobian == "assembled":
-            raise ValueError("CalibrationConfig.jacobian (--jacobian): 'assembled' is for knot navigation, and navigation "
-                             f"{config.navigation!r} gives these runs a velocity per ping: use jacobian 'symbolic' or "
-                             "'auto', or navigation 'knots'")
         self.frame = self.cases[0].attitude.frame
         self.head_sensor = self.frame == "transducer"
         moving = any(r.moving_reference for r in runs)
@@ -349,8 +346,8 @@ class CalibrationProblem:
                          moving_bed=self.moving_bed,
                          bed_knots=config.moving_bed_section_knots)
         compile_min = {"always": 0, "never": None}.get(config.compile, COMPILE_MIN_PINGS)
-        assembled_only = self.walk or config.jacobian == "symbolic"  # compiled models are not expanded to SX
-        self.model = model = SurveyModel(runs, spec, compile_min_pings=None if assembled_only else compile_min)
+        symbolic = config.jacobian == "symbolic"  # compiled models are not expanded to SX
+        self.model = model = SurveyModel(runs, spec, compile_min_pings=None if symbolic else compile_min)
         u = model.unknowns
         self.names, self.scale, self.lbx, self.ubx = list(u.names), u.scale, u.lower, u.upper
         # single-run views (tests, benchmarks, the CLI print)
@@ -362,8 +359,8 @@ class CalibrationProblem:
         z = ca.MX.sym("z", x.shape[0])
         raw = model.raw
         # compiled models are evaluated by the assembled Jacobian (jacobian 'symbolic' compiles nothing)
-        self.assembled = not self.walk and (config.jacobian == "assembled" or model.compiled or (
-            config.jacobian == "auto" and model.assembled_nodes > ASSEMBLED_MIN_NODES))
+        self.assembled = config.jacobian == "assembled" or model.compiled or (
+            config.jacobian == "auto" and model.assembled_nodes > ASSEMBLED_MIN_NODES)
         self.threads = default_threads(config.workers, config.n_starts) if self.assembled else 1
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
         weights = ca.MX.sym("w", raw.shape[0])
@@ -527,7 +524,8 @@ class CalibrationProblem:
         if not self.walk:
             return self.model.reestimate_sigmas(raw, len(z), self.sigma)
         model = self.model
-        J = self.jacobian_fun(z, self.weights()).sparse()
+        J = self.jacobian_fun(z, self.weights())
+        J = J.tocsr() if sp.issparse(J) else J.sparse()
         used = model.mask > 0
         r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=model.velocity_columns())
         return group_levels(raw, model.row_sigma, used, model.sigma_keys, r, self.sigma)
