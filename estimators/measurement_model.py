@@ -353,7 +353,9 @@ def knot_times(case: Case, interval_s: float | None) -> np.ndarray | None:
 
     Default spacing: five reference intervals (or ping intervals without a reference), at
     least 1/50 of the run. Knots cover the pings only: a reference recorded far outside
-    them (a clock off by hours) cannot stretch the problem.
+    them (a clock off by hours) cannot stretch the problem. A knot with neither a ping nor a
+    reference velocity between its neighbours (inside a gap of both) is left out: nothing would
+    determine its velocity, and the curve crosses the gap straight between the knots that bound it.
     """
     ref = case.reference
     if ref is not None and ref.stationary:
@@ -366,7 +368,14 @@ def knot_times(case: Case, interval_s: float | None) -> np.ndarray | None:
         else:
             interval_s = max(5 * float(np.median(np.diff(t))), duration / 30)
     n_knots = max(2, int(np.ceil(duration / interval_s)) + 1)
-    return np.linspace(t[0], t[-1], n_knots)
+    knots = np.linspace(t[0], t[-1], n_knots)
+    data = t
+    if ref is not None and ref.time_s is not None and ref.velocity_m_s is not None:
+        data = np.sort(np.concatenate([t, ref.time_s[np.all(np.isfinite(ref.velocity_m_s[:, :2]), axis=1)]]))
+    # samples in (knot before, knot after) of each knot: the counts between neighbours two apart
+    seen = (np.searchsorted(data, np.append(knots[1:], np.inf), "left")
+            - np.searchsorted(data, np.insert(knots[:-1], 0, -np.inf), "right"))
+    return knots[seen > 0]
 
 
 def ping_knots(case: Case) -> np.ndarray | None:

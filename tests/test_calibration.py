@@ -121,6 +121,41 @@ def test_vessel_frame_installation_yaw_against_reference(lake_case):
     assert r.installation_ypr_se_rad[0] < np.deg2rad(0.1)
 
 
+def _without_pings(case, drop):
+    """``case`` without the pings where ``drop`` is True (every per-ping array cut alike)."""
+    keep, p = ~np.asarray(drop), case.pings
+    cut = {f.name: getattr(p, f.name)[keep] for f in dataclasses.fields(p)
+           if isinstance(getattr(p, f.name), np.ndarray) and getattr(p, f.name).shape[:1] == (p.n,)}
+    water = None if case.water is None else dataclasses.replace(case.water, radial_m_s=case.water.radial_m_s[keep])
+    env = case.environment
+    depth = None if env.water_depth_per_ping_m is None else env.water_depth_per_ping_m[keep]
+    return case.replace(pings=dataclasses.replace(p, **cut), water=water,
+                        environment=dataclasses.replace(env, water_depth_per_ping_m=depth))
+
+
+def test_a_gap_in_the_pings_holds_no_knot(lake_case):
+    """A minute without pings or GNSS (the instrument stopped, a file's lost ensembles): no velocity
+    knot inside it, where nothing would determine it (each had been reported a direction the data do
+    not fix), and the installation yaw still within its standard errors."""
+    from adcpdyn.estimators.measurement_model import knot_times
+
+    t = lake_case.pings.time_s
+    case = _without_pings(lake_case, (t > t[0] + 50.0) & (t < t[0] + 110.0))
+    ref = case.reference
+    lost = ((ref.time_s > t[0] + 50.0) & (ref.time_s < t[0] + 110.0))[:, None]
+    case = case.replace(reference=dataclasses.replace(ref, velocity_m_s=np.where(lost, np.nan, ref.velocity_m_s)))
+    knots = knot_times(case, 5.0)
+    before, after = np.searchsorted(case.pings.time_s, knots[1:]), np.searchsorted(case.pings.time_s, knots[:-1], "right")
+    assert np.all(after <= before)  # between any two neighbouring knots there is no knot without a ping beside it
+    inside = (knots > t[0] + 55.0) & (knots < t[0] + 105.0)
+    assert not inside.any() and knots[0] == case.pings.time_s[0] and knots[-1] == case.pings.time_s[-1]
+    r = _quiet_calibrate(case, formulation="minimal", n_starts=2, timing="shallow", moving_bed="off",
+                         velocity_knot_interval_s=5.0)
+    assert not any("not determined by the data" in w for w in r.warnings), r.warnings
+    z = (r.installation_ypr_rad - case.truth.installation_ypr_rad) / r.installation_ypr_se_rad
+    assert np.all(np.abs(z) < Z_MAX)
+
+
 @pytest.mark.slow  # 23 s: `make test-slow`, CI's second step
 def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_case, capsys):
     """With the bed a parameter (``constant``), one straight run cannot tell a bed moving under the
