@@ -154,3 +154,16 @@ def calibrated_pool_m0(folder, n_starts: int):
     path = folder / "CALIB.json"
     result.to_json(path)
     return result, path, m0
+
+
+def without_pings(case, drop):
+    """``case`` without the pings where ``drop`` is True (every per-ping array cut alike) and without its
+    water profile (whose cells must lie above the kept pings' beds)."""
+    keep, n = ~np.asarray(drop), case.pings.n
+
+    def cut(group):
+        per_ping = {f.name: getattr(group, f.name)[keep] for f in dataclasses.fields(group)
+                    if isinstance(getattr(group, f.name), np.ndarray) and getattr(group, f.name).shape[:1] == (n,)}
+        return dataclasses.replace(group, **per_ping)
+
+    return case.replace(pings=cut(case.pings), water=None, environment=cut(case.environment))

@@ -10,7 +10,7 @@ import warnings
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import noise_free
+from conftest import noise_free, without_pings
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate
@@ -121,18 +121,6 @@ def test_vessel_frame_installation_yaw_against_reference(lake_case):
     assert r.installation_ypr_se_rad[0] < np.deg2rad(0.1)
 
 
-def _without_pings(case, drop):
-    """``case`` without the pings where ``drop`` is True (every per-ping array cut alike)."""
-    keep, p = ~np.asarray(drop), case.pings
-    cut = {f.name: getattr(p, f.name)[keep] for f in dataclasses.fields(p)
-           if isinstance(getattr(p, f.name), np.ndarray) and getattr(p, f.name).shape[:1] == (p.n,)}
-    water = None if case.water is None else dataclasses.replace(case.water, radial_m_s=case.water.radial_m_s[keep])
-    env = case.environment
-    depth = None if env.water_depth_per_ping_m is None else env.water_depth_per_ping_m[keep]
-    return case.replace(pings=dataclasses.replace(p, **cut), water=water,
-                        environment=dataclasses.replace(env, water_depth_per_ping_m=depth))
-
-
 def test_a_gap_in_the_pings_holds_no_knot(lake_case):
     """A minute without pings or GNSS (the instrument stopped, a file's lost ensembles): no velocity
     knot inside it, where nothing would determine it (each had been reported a direction the data do
@@ -140,7 +128,7 @@ def test_a_gap_in_the_pings_holds_no_knot(lake_case):
     from adcpdyn.estimators.measurement_model import knot_times
 
     t = lake_case.pings.time_s
-    case = _without_pings(lake_case, (t > t[0] + 50.0) & (t < t[0] + 110.0))
+    case = without_pings(lake_case, (t > t[0] + 50.0) & (t < t[0] + 110.0))
     ref = case.reference
     lost = ((ref.time_s > t[0] + 50.0) & (ref.time_s < t[0] + 110.0))[:, None]
     case = case.replace(reference=dataclasses.replace(ref, velocity_m_s=np.where(lost, np.nan, ref.velocity_m_s)))

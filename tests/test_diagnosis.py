@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import REAL, refit_without
+from conftest import REAL, refit_without, without_pings
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.diagnosis import where
@@ -154,6 +154,53 @@ def test_a_compass_error_of_any_angle_is_named_with_its_size():
     est, se = top["params"]["compass_offset.A_rad"], top["params_se"]["compass_offset.A_rad"]
     # within half a degree: the calibration's installation yaw, pinned in the base, is itself ~0.1 deg off
     assert not top["at_bound"] and 0 < se < np.radians(0.5) and abs(est - np.radians(-45.0)) < np.radians(0.5)
+
+
+def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
+    """The calibration's own runs, calibrated on knots and diagnosed on a velocity per ping: a compass
+    offset or bed named there may be the two bases reading the same data apart, and the statement says
+    so with its size and the option that removes the doubt; nothing is said for other runs, the same
+    base, effects the calibration does not fit, or a record without the runs' navigation."""
+    from adcpdyn.estimators.diagnosis.diagnose import calibration_base_note
+
+    def record(nav, se=np.radians(2.9)):
+        return SimpleNamespace(runs=[SimpleNamespace(case="a", navigation=nav)], heading_misalignment_se_rad=se)
+
+    base = SimpleNamespace(runs=[SimpleNamespace(case=SimpleNamespace(name="a"), navigation="random_walk")])
+    score = SimpleNamespace(effect="compass_offset", significant=True, params={"compass_offset.A_rad": np.radians(-5.78)},
+                            params_se={"compass_offset.A_rad": np.radians(1.05)})
+    note = calibration_base_note(record("knots"), base, ["compass_offset"], [score])
+    assert "calibrated on knots navigation while this base takes random_walk" in note
+    assert "compass_offset.A -5.78 +- 1.1 deg" in note and "+- 2.9 deg" in note and "--navigation random_walk" in note
+    assert calibration_base_note(record("random_walk"), base, ["compass_offset"], [score]) == ""
+    assert calibration_base_note(record(None), base, ["compass_offset"], [score]) == ""
+    assert calibration_base_note(record("knots"), base, ["heave"], [score]) == ""
+    assert calibration_base_note(None, base, ["compass_offset"], [score]) == ""
+    other = SimpleNamespace(runs=[SimpleNamespace(case=SimpleNamespace(name="b"), navigation="random_walk")])
+    assert calibration_base_note(record("knots"), other, ["compass_offset"], [score]) == ""
+
+
+@pytest.mark.slow  # 32 s: `make test-slow`
+@pytest.mark.skipif(not (REAL / "winriver02_transect.PD0").is_file(), reason="real file absent")
+def test_a_gappy_real_run_calibrated_on_knots_is_told_to_recalibrate():
+    """winriver02 cut to the shape of the held-back winriver02.PD0 (its first 64 s with GNSS, 170 s
+    without pings, 25 more pings without GNSS): calibrated on knots its heading misalignment sits ~6 deg
+    from the random-walk base's (and from the IGRF declination, 2 of its SEs), which the diagnosis names
+    as a compass offset and says may be the bases' difference; calibrated on the random walk it names
+    nothing there."""
+    from adcpdyn import api
+
+    full = api.import_file(REAL / "winriver02_transect.PD0").case
+    t = full.pings.time_s - full.pings.time_s[0]
+    case = without_pings(full, ~((t < 64) | ((t >= 234) & (t < 234 + 25 * 1.31))))
+    ref = case.reference
+    late = (ref.time_s - full.pings.time_s[0] >= 64)[:, None]
+    case = case.replace(reference=dataclasses.replace(ref, velocity_m_s=np.where(late, np.nan, ref.velocity_m_s)))
+    config = DiagnosisConfig(effects=("compass_offset", "moving_bed", "reference_latency"), navigation="random_walk")
+    on_knots = diagnose(case, config, calibration=as_record(api.calibrate(case, n_starts=8, navigation="knots")))
+    assert "compass_offset" in on_knots.verdict and on_knots.base["calibration_on_another_base"]
+    on_walk = diagnose(case, config, calibration=as_record(api.calibrate(case, n_starts=8, navigation="random_walk")))
+    assert "compass_offset" not in on_walk.verdict and not on_walk.base["calibration_on_another_base"]
 
 
 def test_effect_free_case_gets_none():

@@ -902,6 +902,9 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         reasons = "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs if r.attitude_source == "samples"))
         statement = ("beams' attitude from the sensor's samples (" + reasons + "): effects on the sensor are undone on "
                      "the samples; " + statement)
+    other_base = calibration_base_note(calibration, base, selected, ranking)
+    if other_base:
+        statement += "; " + other_base
     if base.notes:
         statement += " [base: " + "; ".join(base.notes) + "]"
     run_holdout = {}
@@ -916,6 +919,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                  "attitude_source_reason": "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs)),
                  "calibration": base.pins.source or None, "pinned": base.pins.values, "notes": base.notes,
                  "navigation": ", ".join(dict.fromkeys(r.navigation for r in base.runs)),
+                 "calibration_on_another_base": other_base or None,
                  "log_likelihood": float(base_fit.log_likelihood(base_model)), "n_observations": n_obs,
                  "skipped_effects": skipped,
                  "unknowns": {n: float(base_fit.x[i]) for i, n in enumerate(base_model.names)
@@ -930,6 +934,42 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         confounded=confounded,
         alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
+
+
+RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects on quantities a calibration fits
+
+
+def calibration_base_note(calibration, base, selected: list, ranking: list) -> str:
+    """What to say when the runs diagnosed are the calibration's own, calibrated on another
+    navigation than this base's, and an effect on a quantity the calibration fitted (heading, bed)
+    is named: on the same data two bases can read that quantity apart (knots miss a real boat's
+    motion between fixes), so the effect may be the bases' difference rather than a change since
+    the calibration. '' otherwise."""
+    named = [e for e in selected if e in RECALIBRATED]
+    if calibration is None or not named:
+        return ""
+    own = {r.case: r.navigation for r in calibration.runs}
+    if any(own.get(r.case.name) is None for r in base.runs):  # not its runs, or a file older than the record
+        return ""
+    differs = {(own[r.case.name], r.navigation) for r in base.runs if own[r.case.name] != r.navigation}
+    if not differs:
+        return ""
+    calibrated, here = (", ".join(sorted({pair[i] for pair in differs})) for i in (0, 1))
+    found = []
+    for name in named:
+        score = next(s for s in ranking if s.effect == name and s.significant)
+        for key, value in score.params.items():
+            se = score.params_se.get(key)
+            angle = key.endswith("A_rad")
+            if angle or "moving_bed" in key:
+                label, unit, k = (key[:-4], "deg", np.degrees(1.0)) if angle else (key.removesuffix("_m_s"), "m/s", 1.0)
+                found.append(f"{label} {k * value:+.3g}" + (f" +- {k * se:.2g}" if se is not None else "") + f" {unit}")
+    extra = ""
+    if calibration.heading_misalignment_se_rad is not None and any(n.startswith("compass") for n in named):
+        extra = f" (the calibration's heading misalignment: +- {np.degrees(calibration.heading_misalignment_se_rad):.2g} deg)"
+    return (f"these are the calibration's own runs, calibrated on {calibrated} navigation while this base takes {here}: "
+            f"{', '.join(found)}{extra} may be the two bases reading the same data apart rather than a change since the "
+            f"calibration; calibrate with --navigation {here} (this base) and diagnose again before reading it as one")
 
 
 def significant(s: EffectScore, ref_gap: float, config: DiagnosisConfig, walk: bool) -> bool:
