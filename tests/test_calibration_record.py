@@ -101,3 +101,31 @@ def test_record_types_a_survey_calibration():
         CalibrationRecord.from_dict({**d, "runs": [{"case": "x", "moving_bed_velocity_m_s": [0.0, 0.0]},
                                                    {"case": "y", "moving_bed_velocity_m_s": [9.0, 0.0]}]})
 
+
+def test_a_run_written_again_under_another_name_is_the_calibrations_run():
+    """A transect copied under another name (a field error injected by another tool) is still the
+    calibration's run when its pings lie within the calibration's UTC span: its run record and its
+    bed are found for it (the diagnosis had tested it for the bed its calibration had already fixed);
+    a run outside that span, or without UTC times, is not, and a survey's runs are matched by name only."""
+    from types import SimpleNamespace
+
+    d = {"schema_version": 2, "attitude_frame": "transducer", "installation_ypr_rad": [0.0, None, None],
+         "moving_bed": {"model": "constant"}, "moving_bed_velocity_m_s": [0.05, -0.15],
+         "site": {"latitude_deg": 64.56, "longitude_deg": -149.07, "start_utc": "2022-08-19T20:13:00.000000Z",
+                  "end_utc": "2022-08-19T20:17:30.000000Z"},
+         "runs": [{"case": "transect", "transducer_depth_offset_m": 0.02, "navigation": "knots"}]}
+    rec = CalibrationRecord.from_dict(d)
+
+    def case(name, start_s, end_s, origin="2022-08-19T20:13:00Z"):
+        return SimpleNamespace(name=name, time_origin_utc=origin, position=None,
+                               pings=SimpleNamespace(n=3, time_s=np.linspace(start_s, end_s, 3)))
+
+    copy = case("transect_compass_2deg", 0.0, 270.0)
+    assert rec.holds(copy) and rec.run_of(copy).transducer_depth_offset_m == 0.02 and rec.run_of(copy).navigation == "knots"
+    later = case("next_transect", 300.0, 600.0)
+    assert not rec.holds(later) and rec.run_of(later) is None
+    assert rec.run_of(case("transect", 300.0, 600.0)).case == "transect"  # its name is enough
+    assert not rec.holds(case("copy", 0.0, 270.0, origin=None))
+    survey = CalibrationRecord.from_dict({**d, "runs": d["runs"] + [{"case": "other"}]})
+    assert survey.holds(copy) and survey.run_of(copy) is None  # within the span, but which of its runs is unknown
+

@@ -164,7 +164,9 @@ def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
     from adcpdyn.estimators.diagnosis.diagnose import calibration_base_note
 
     def record(nav, se=np.radians(2.9)):
-        return SimpleNamespace(runs=[SimpleNamespace(case="a", navigation=nav)], heading_misalignment_se_rad=se)
+        run = SimpleNamespace(case="a", navigation=nav)
+        return SimpleNamespace(runs=[run], heading_misalignment_se_rad=se,
+                               run_of=lambda case: run if case.name == "a" else None)
 
     base = SimpleNamespace(runs=[SimpleNamespace(case=SimpleNamespace(name="a"), navigation="random_walk")])
     score = SimpleNamespace(effect="compass_offset", significant=True, params={"compass_offset.A_rad": np.radians(-5.78)},
@@ -201,6 +203,23 @@ def test_a_gappy_real_run_calibrated_on_knots_is_told_to_recalibrate():
     assert "compass_offset" in on_knots.verdict and on_knots.base["calibration_on_another_base"]
     on_walk = diagnose(case, config, calibration=as_record(api.calibrate(case, n_starts=8, navigation="random_walk")))
     assert "compass_offset" not in on_walk.verdict and not on_walk.base["calibration_on_another_base"]
+
+
+@pytest.mark.slow  # 6-8 s: `make test-slow`
+@pytest.mark.skipif(not (REAL / "RiverPro_test01.PD0").is_file(), reason="real file absent")
+def test_a_calibrated_run_under_another_name_keeps_its_calibrated_bed():
+    """RiverPro_test01 calibrated on itself (its bed moving 0.09 m/s) and diagnosed as written under
+    another name (as another tool writes a run with an error injected): the calibration's bed is in
+    the base as for the run itself, so the clean copy names nothing (it had named moving_bed)."""
+    from adcpdyn import api
+
+    case = api.import_file(REAL / "RiverPro_test01.PD0").case
+    calibration = as_record(api.calibrate(case, n_starts=4))
+    assert calibration.moving_bed_velocity_m_s is not None
+    config = DiagnosisConfig(effects=("moving_bed", "compass_offset", "sound_speed_error"), navigation="random_walk")
+    same, renamed = (diagnose(c, config, calibration=calibration) for c in (case, case.replace(name="RiverPro_copy")))
+    assert same.verdict == renamed.verdict == "none"
+    assert renamed.base["pinned"]["moving_bed_north"] == calibration.moving_bed_velocity_m_s[0]
 
 
 def test_effect_free_case_gets_none():

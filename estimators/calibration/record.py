@@ -22,7 +22,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...cases.identity import InstrumentIdentity, Site
+from ...cases.case import parse_utc
+from ...cases.identity import InstrumentIdentity, Site, site_of
 from .file import Calibration, calibration_from_dict, read_calibration, source_prefix
 
 __all__ = ["AppliedCalibration", "CalibrationRecord", "RunRecord", "as_record"]
@@ -272,6 +273,31 @@ class CalibrationRecord:
     def run_for(self, case_name: str) -> RunRecord | None:
         """The run of that case name, or None."""
         return next((r for r in self.runs if r.case == case_name), None)
+
+    def run_of(self, case) -> RunRecord | None:
+        """The run of the calibration a case is: by its name, else, for a one-run calibration, a case
+        whose pings lie within the calibration's UTC span (the same run written again under another
+        name, e.g. with an error injected); None otherwise."""
+        own = self.run_for(case.name)
+        if own is None and len(self.runs) == 1 and self.spans(case):
+            return self.runs[0]
+        return own
+
+    def holds(self, case) -> bool:
+        """Whether a case is one of the calibration's runs: by name, or its pings within the UTC span
+        of the calibration's runs."""
+        return self.run_for(case.name) is not None or self.spans(case)
+
+    def spans(self, case) -> bool:
+        """Whether a case's pings lie within the UTC span of the calibration's runs (one ping
+        interval of slack at each end); False without UTC times on either side."""
+        if self.site is None or not (self.site.start_utc and self.site.end_utc) or not case.time_origin_utc:
+            return False
+        own = site_of([case])
+        slack = float(np.median(np.diff(case.pings.time_s))) if case.pings.n > 1 else 0.0
+        start, end = ((parse_utc(b) - parse_utc(a)).total_seconds()
+                      for a, b in ((self.site.start_utc, own.start_utc), (own.end_utc, self.site.end_utc)))
+        return start >= -slack and end >= -slack
 
     def moving_bed_for(self, case_name: str) -> tuple[np.ndarray | None, str]:
         """The bed velocity (north, east) under a case's pings, and where it came from: the case's

@@ -389,7 +389,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationReco
     timing = "deep" if calibration and calibration.timing.split(",")[0] in ("deep", "exact") else "shallow"
     for case in cases:
         af = fit_attitude(case, max_modes=config.max_modes)
-        own = None if calibration is None else calibration.run_for(case.name)
+        own = None if calibration is None else calibration.run_of(case)
         if own and own.attitude_model is not None:  # this very run was calibrated: its motion model starts the fit
             af = dataclasses.replace(af, params=own.attitude_model)
         source, reason = choose_attitude(case, af, config.attitude)
@@ -433,13 +433,12 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationReco
                 pins[f"P_{a}"] = float(value)
             notes.append("lever arms pinned at the calibration's (head centre)")
         bed = calibration.moving_bed_velocity_m_s
-        calibrated_runs = {r.case for r in calibration.runs}
-        if bed is not None and all(c.name in calibrated_runs for c in cases) and calibration.moving_bed == "constant":
+        if bed is not None and all(calibration.holds(c) for c in cases) and calibration.moving_bed == "constant":
             moving_bed = "constant"  # these very runs were calibrated: their bed is the base's
             pins.update({"moving_bed_north": float(bed[0]), "moving_bed_east": float(bed[1])})
             notes.append("moving bed pinned at the calibration's (these runs were calibrated)")
         for k, case in enumerate(cases):  # a calibrated run's transducer depth, as its slant ranges gave it
-            own = calibration.run_for(case.name)
+            own = calibration.run_of(case)
             if own and own.transducer_depth_offset_m is not None and runs[k].use_ranges:
                 name = "transducer_depth_offset_m" if len(cases) == 1 else f"run{k + 1}/transducer_depth_offset_m"
                 pins[name] = own.transducer_depth_offset_m
@@ -948,10 +947,10 @@ def calibration_base_note(calibration, base, selected: list, ranking: list) -> s
     named = [e for e in selected if e in RECALIBRATED]
     if calibration is None or not named:
         return ""
-    own = {r.case: r.navigation for r in calibration.runs}
-    if any(own.get(r.case.name) is None for r in base.runs):  # not its runs, or a file older than the record
+    own = [calibration.run_of(r.case) for r in base.runs]
+    if any(o is None or o.navigation is None for o in own):  # not its runs, or a file older than the record
         return ""
-    differs = {(own[r.case.name], r.navigation) for r in base.runs if own[r.case.name] != r.navigation}
+    differs = {(o.navigation, r.navigation) for o, r in zip(own, base.runs) if o.navigation != r.navigation}
     if not differs:
         return ""
     calibrated, here = (", ".join(sorted({pair[i] for pair in differs})) for i in (0, 1))
