@@ -122,6 +122,8 @@ def test_a_run_written_again_under_another_name_is_the_calibrations_run():
 
     copy = case("transect_compass_2deg", 0.0, 270.0)
     assert rec.holds(copy) and rec.run_of(copy).transducer_depth_offset_m == 0.02 and rec.run_of(copy).navigation == "knots"
+    assert rec.moving_bed_for(copy)[1] == "the calibration's site bed (this run's own is not determined)"
+    assert rec.applied_to(copy, "transducer", dynamic=False).transducer_depth_offset_m == 0.02  # what `correct` applies
     later = case("next_transect", 300.0, 600.0)
     assert not rec.holds(later) and rec.run_of(later) is None
     assert rec.run_of(case("transect", 300.0, 600.0)).case == "transect"  # its name is enough

@@ -299,13 +299,18 @@ class CalibrationRecord:
                       for a, b in ((self.site.start_utc, own.start_utc), (own.end_utc, self.site.end_utc)))
         return start >= -slack and end >= -slack
 
-    def moving_bed_for(self, case_name: str) -> tuple[np.ndarray | None, str]:
-        """The bed velocity (north, east) under a case's pings, and where it came from: the case's
-        own run when both its components are determined, else the site's bed when both of its
-        are, else ``(None, "")``. The one bed lookup: never a half-determined (NaN) bed."""
-        own = self.run_for(case_name)
+    def _own(self, case) -> RunRecord | None:
+        """A case's run: :meth:`run_of` for a case, :meth:`run_for` for a case name."""
+        return self.run_for(case) if isinstance(case, str) else self.run_of(case)
+
+    def moving_bed_for(self, case) -> tuple[np.ndarray | None, str]:
+        """The bed velocity (north, east) under a case's pings (``case``: the case, matched by
+        :meth:`run_of`, or its name), and where it came from: the case's own run when both its
+        components are determined, else the site's bed when both of its are, else ``(None, "")``.
+        The one bed lookup: never a half-determined (NaN) bed."""
+        own = self._own(case)
         if own is not None and own.moving_bed_velocity_m_s is not None:
-            return own.moving_bed_velocity_m_s, f"run {case_name!r} of the calibration"
+            return own.moving_bed_velocity_m_s, f"run {own.case!r} of the calibration"
         if self.moving_bed_velocity_m_s is None:
             return None, ""
         why = "this case is not one of its runs" if own is None else "this run's own is not determined"
@@ -341,12 +346,12 @@ class CalibrationRecord:
                                "missing; expected 3 angles in radians")
         return nominal.copy(), False
 
-    def applied_to(self, case_name: str, sensor_frame: str, dynamic: bool) -> AppliedCalibration:
-        """Everything the correction of one run takes from this calibration, resolved at once: the
-        run's bed and depth offset, the heading correction of a head sensor, and the installation
-        and lever arms the method needs (``dynamic``: the dynamic methods' lever arms and beam
-        rotation; else the static correction's installation angles, for a vessel-frame sensor),
-        each refused in one line here when the file does not determine it."""
+    def applied_to(self, case, sensor_frame: str, dynamic: bool) -> AppliedCalibration:
+        """Everything the correction of one run (``case``: the case, or its name) takes from this
+        calibration, resolved at once: the run's bed and depth offset, the heading correction of a
+        head sensor, and the installation and lever arms the method needs (``dynamic``: the dynamic
+        methods' lever arms and beam rotation; else the static correction's installation angles,
+        for a vessel-frame sensor), each refused in one line here when the file does not determine it."""
         head = sensor_frame == "transducer"
         static, determined = (self.installation_or_nominal() if not head and not dynamic else (None, False))
         if dynamic:
@@ -359,8 +364,8 @@ class CalibrationRecord:
                 "magnetic declination, not applied separately" if delta is not None else
                 "headings as recorded (vessel-frame attitude: installation angles instead)" if not head else
                 "headings as recorded (the calibration has no heading misalignment)")
-        own = self.run_for(case_name)
-        bed, source = self.moving_bed_for(case_name)
+        own = self._own(case)
+        bed, source = self.moving_bed_for(case)
         return AppliedCalibration(
             lever_arms_sensor_m=lever, beam_installation_ypr_rad=beams,
             static_installation_ypr_rad=static, static_installation_determined=determined, heading_misalignment_rad=delta,

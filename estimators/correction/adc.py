@@ -244,7 +244,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: Calibration
         if calibration is None:
             raise ValueError(f"calibration: required for method {method!r} (run `adcpdyn calibrate` first)")
         if isinstance(calibration, CalibrationRecord):
-            calibration = calibration.applied_to(case.name, case.attitude.frame, dynamic=True)
+            calibration = calibration.applied_to(case, case.attitude.frame, dynamic=True)
         if calibration.lever_arms_sensor_m is None:
             raise ValueError(f"calibration: resolved for the static correction (no lever arms); method {method!r} "
                              "needs CalibrationRecord.applied_to(..., dynamic=True)")

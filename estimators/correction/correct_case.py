@@ -60,7 +60,7 @@ def correct_case(case: Case, method: str, calibration: CalibrationRecord | None 
     if method not in CORRECTION_METHODS:
         raise ValueError(f"--method: expected one of {list(CORRECTION_METHODS)}, got {method!r}")
     applied = None if calibration is None or method == "oracle" else \
-        calibration.applied_to(case.name, case.attitude.frame, dynamic=method != "asc")
+        calibration.applied_to(case, case.attitude.frame, dynamic=method != "asc")
     entered = float(case.environment.transducer_depth_m)
     case, depth_note = with_calibrated_depth(case, applied)
     result = _correct(case, method, applied, timing, reference)
