@@ -181,7 +181,12 @@ class RowJacobian:
 
     def gram_sparsity(self) -> sp.csr_matrix:
         """Pattern of J^T J (n_z, n_z), from the blocks' structure (shared columns dense, knots
-        sparse) without multiplying J's pattern out."""
+        sparse) without multiplying J's pattern out; formed once."""
+        if getattr(self, "_gram_pattern", None) is None:
+            self._gram_pattern = self._gram_pattern_of_blocks()
+        return self._gram_pattern
+
+    def _gram_pattern_of_blocks(self) -> sp.csr_matrix:
         G = sp.csr_matrix((self.n_z, self.n_z))
         for index, sc in enumerate(self._cols):
             rows, cols = np.repeat(sc, sc.size), np.tile(sc, sc.size)

@@ -400,6 +400,9 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     assert np.all((symbolic != 0) <= pattern.toarray())
     # J^T J's pattern from the blocks' structure is the product of J's pattern
     assert np.array_equal(problems["assembled"].jacobian_fun.gram_sparsity().toarray(), (pattern.T @ pattern).toarray() != 0)
+    if navigation == "knots":  # J^T J mostly filled: formed dense
+        from adcpdyn.solvers.gauss_newton import dense_gram
+        assert dense_gram(problems["assembled"].jacobian_fun)
 
 
 @pytest.mark.slow  # 9 s: `make test-slow`, CI's second step
