@@ -111,6 +111,11 @@ class RowJacobian:
         self._pool = _pool(threads) if threads > 1 else None
         self._local = threading.local()  # evaluation buffers are per thread (multistart solves in threads)
 
+    @property
+    def max_knot_columns(self) -> int:
+        """The most velocity (knot) columns any block's rows reach: a run's knots times three."""
+        return max((k.size for i, k in enumerate(self._knots) if k is not None and self._has_knots(i)), default=0)
+
     @functools.cached_property
     def sparsity(self) -> sp.csr_matrix:
         """Structural pattern of J (rows x z), built on first use (J^T J's comes from :meth:`gram_sparsity`)."""
@@ -181,12 +186,7 @@ class RowJacobian:
 
     def gram_sparsity(self) -> sp.csr_matrix:
         """Pattern of J^T J (n_z, n_z), from the blocks' structure (shared columns dense, knots
-        sparse) without multiplying J's pattern out; formed once."""
-        if getattr(self, "_gram_pattern", None) is None:
-            self._gram_pattern = self._gram_pattern_of_blocks()
-        return self._gram_pattern
-
-    def _gram_pattern_of_blocks(self) -> sp.csr_matrix:
+        sparse) without multiplying J's pattern out."""
         G = sp.csr_matrix((self.n_z, self.n_z))
         for index, sc in enumerate(self._cols):
             rows, cols = np.repeat(sc, sc.size), np.tile(sc, sc.size)

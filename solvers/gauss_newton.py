@@ -20,18 +20,18 @@ import numpy as np
 import scipy.sparse as sp
 
 DENSE_GRAM_MAX_UNKNOWNS = 3000  # up to here J^T J is formed dense from the Jacobian's blocks ...
-DENSE_GRAM_MIN_FILL = 0.1  # ... when at least this share of it is structurally nonzero (knots: 0.25-0.45; a velocity per ping: 0.02)
+DENSE_GRAM_MAX_KNOT_COLUMNS = 600  # ... when no run has more velocity columns than this
 
 
 def dense_gram(jacobian) -> bool:
-    """Whether J^T J is formed dense from an assembled Jacobian's blocks: few unknowns and a Gram
-    mostly filled (knots, shared unknowns). A velocity per ping (a random walk) makes it thousands
-    of unknowns coupled only to their neighbours: forming it dense cost 16x the sparse product on a
-    830-ping transect (90 s vs 5.5 s), so there J^T J is sparse."""
-    n = jacobian.n_z
-    if not hasattr(jacobian, "gram_and_gradient") or n > DENSE_GRAM_MAX_UNKNOWNS:
+    """Whether J^T J is formed dense from an assembled Jacobian's blocks: few unknowns, and each
+    block's velocity columns few (knots), since every block adds its velocity columns' square to
+    the dense matrix. A velocity per ping (a random walk) gives one run thousands of them: dense,
+    an 830-ping transect took 90 s, sparse 5.5 s; twenty transects on knots (1897 unknowns, 2 %
+    filled, ~90 velocity columns each) take 42.5 s dense, 49.2 s sparse."""
+    if not hasattr(jacobian, "gram_and_gradient") or jacobian.n_z > DENSE_GRAM_MAX_UNKNOWNS:
         return False
-    return jacobian.gram_sparsity().nnz >= DENSE_GRAM_MIN_FILL * n * n
+    return getattr(jacobian, "max_knot_columns", 0) <= DENSE_GRAM_MAX_KNOT_COLUMNS
 
 
 class AssembledLeastSquares:
