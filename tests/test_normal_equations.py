@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from conftest import refit_without
 
 from adcpdyn.estimators.statistics.normal_equations import (leave_out_predictions, log_det_normal, marginal_covariance,
-                                                           quadratic_diagonal, factor, redundancy)
+                                                           quadratic_diagonal, factor, inverse_diagonal, redundancy)
 
 
 def _problem(seed=0, n=400, p=12):
@@ -29,6 +29,22 @@ def test_leverages_and_covariance_equal_the_dense_inverse():
     np.testing.assert_allclose(quadratic_diagonal(lu, J), np.einsum("ij,jk,ik->i", Jd, A_inv, Jd), rtol=1e-9)
     index = [3, 0, 7]
     np.testing.assert_allclose(marginal_covariance(J, index, 2.5), 2.5 * A_inv[np.ix_(index, index)], rtol=1e-6)
+
+
+def test_the_inverse_diagonal_from_the_band_equals_the_dense_one():
+    """diag(A^-1) of a banded SPD matrix (a velocity per ping's normal equations: blocks of runs, each
+    banded) by Takahashi's recurrences equals the dense inverse's; a wide band takes the LU solves."""
+    rng = np.random.default_rng(4)
+    blocks = []
+    for n in (40, 25):  # two runs: banded blocks, no coupling between them
+        B = sp.random(n, n, density=1.0, random_state=rng).toarray()
+        B = np.triu(np.tril(B, 3), -3)
+        blocks.append(B @ B.T + n * np.eye(n))
+    A = sp.block_diag(blocks, format="csc")
+    dense = np.diag(np.linalg.inv(A.toarray()))
+    np.testing.assert_allclose(inverse_diagonal(A), dense, rtol=1e-10)
+    wide = sp.csc_matrix(A.toarray() + 0.01 * np.ones(A.shape))  # every unknown coupled: no band
+    np.testing.assert_allclose(inverse_diagonal(wide), np.diag(np.linalg.inv(wide.toarray())), rtol=1e-9)
 
 
 def test_log_det_of_the_normal_matrix_equals_the_dense_one():

@@ -105,6 +105,25 @@ def band_of_inverse(Lb: np.ndarray) -> np.ndarray:
     return zb
 
 
+def inverse_diagonal(A: sp.spmatrix, lu=None) -> np.ndarray:
+    """diag(A^-1), A symmetric positive definite: from the band of the inverse (Takahashi's
+    recurrences on A's banded Cholesky factor, linear in its size) when A's band is at most
+    :data:`MAX_BAND` wide, as the velocities per ping are; else by solves against a sparse LU
+    (``lu`` when the caller has factored A already: as many solves as A has rows)."""
+    A = sp.csc_matrix(A)
+    C = A.tocoo()
+    p = int(np.max(np.abs(C.row - C.col))) if C.nnz else 0
+    if p <= MAX_BAND:
+        lower = C.row >= C.col
+        ab = np.zeros((p + 1, A.shape[0]))
+        np.add.at(ab, (C.row[lower] - C.col[lower], C.col[lower]), C.data[lower])
+        try:
+            return band_of_inverse(cholesky_banded(ab, lower=True))[0]
+        except LinAlgError:
+            pass
+    return quadratic_diagonal(lu if lu is not None else splu(A), sp.identity(A.shape[0], format="csr"))
+
+
 def quadratic_diagonal(lu, J: sp.csr_matrix) -> np.ndarray:
     """diag(J A^-1 J^T) for the factor ``lu`` of A: each row's leverage."""
     out = np.zeros(J.shape[0])

@@ -171,7 +171,7 @@ def uncertainty_eliminating(J, A: np.ndarray | None, names: list, scale: np.ndar
     (unknowns x unknowns) is formed. The local unknowns' variances are diag(G_VV^-1) + diag(X C X^T)
     (X = G_VV^-1 G_VS, C the rest's covariance), their covariance with the rest -X C
     (:meth:`Uncertainty.cov_columns`); the rest's undetermined directions carry -X d into them."""
-    from .normal_equations import quadratic_diagonal, ridged
+    from .normal_equations import inverse_diagonal, ridged
 
     J = sp.csr_matrix(J) if not sp.issparse(J) else J.tocsr()
     local = np.asarray(local, dtype=bool)
@@ -180,7 +180,8 @@ def uncertainty_eliminating(J, A: np.ndarray | None, names: list, scale: np.ndar
         raise ValueError("local: the eliminated unknowns must not enter the constraints")
     G = (J.T @ J).tocsr()
     G_V = G[V]  # the velocities' rows, sliced once
-    lu = splu(ridged(G_V[:, V]))
+    G_VV = ridged(G_V[:, V])
+    lu = splu(G_VV)
     G_VS = G_V[:, S].toarray()
     X = lu.solve(G_VS)
     F = G[S][:, S].toarray() - G_VS.T @ X
@@ -189,7 +190,7 @@ def uncertainty_eliminating(J, A: np.ndarray | None, names: list, scale: np.ndar
     n = len(names)
     se = np.empty(n)
     se[S] = red.se_z
-    var_V = quadratic_diagonal(lu, sp.identity(V.size, format="csr")) + np.einsum("ij,jk,ik->i", X, red.cov_z, X)
+    var_V = inverse_diagonal(G_VV, lu) + np.einsum("ij,jk,ik->i", X, red.cov_z, X)
     se[V] = np.sqrt(np.maximum(var_V, 0.0))
     null = np.zeros((red.null_directions_z.shape[0], n))
     if null.shape[0]:
