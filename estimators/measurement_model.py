@@ -1077,13 +1077,19 @@ class SurveyModel:
             t, v = corr.time_s, corr.vessel_velocity_m_s
         half = np.median(np.diff(run.knots)) / 2
         out = np.zeros((run.knots.size, 3))
+        order = np.argsort(t, kind="stable")
+        t, v = t[order], v[order]
         for j in range(3):
             ok = np.isfinite(v[:, j])
             if ok.sum() == 0:
                 continue
-            for i, tk in enumerate(run.knots):
-                sel = ok & (np.abs(t - tk) <= half)
-                out[i, j] = np.mean(v[sel, j]) if sel.any() else np.interp(tk, t[ok], v[ok, j])
+            tj, vj = t[ok], v[ok, j]
+            lo = np.searchsorted(tj, run.knots - half, "left")  # the samples within half a spacing of each knot
+            hi = np.searchsorted(tj, run.knots + half, "right")
+            sums = np.concatenate([[0.0], np.cumsum(vj)])
+            inside = hi > lo
+            out[:, j] = np.interp(run.knots, tj, vj)
+            out[inside, j] = (sums[hi] - sums[lo])[inside] / (hi - lo)[inside]
         return out
 
 
