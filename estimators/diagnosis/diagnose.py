@@ -436,7 +436,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationReco
         if bed is not None and all(calibration.holds(c) for c in cases) and calibration.moving_bed == "constant":
             moving_bed = "constant"  # these very runs were calibrated: their bed is the base's
             pins.update({"moving_bed_north": float(bed[0]), "moving_bed_east": float(bed[1])})
-            notes.append("moving bed pinned at the calibration's (these runs were calibrated)")
+            notes.append("moving bed pinned at the calibration's (these runs are its own: by name or within its time span)")
         for k, case in enumerate(cases):  # a calibrated run's transducer depth, as its slant ranges gave it
             own = calibration.run_of(case)
             if own and own.transducer_depth_offset_m is not None and runs[k].use_ranges:
