@@ -387,6 +387,14 @@ def ping_knots(case: Case) -> np.ndarray | None:
     return np.asarray(case.pings.time_s, dtype=float).copy()
 
 
+def walk_increments(knots: np.ndarray) -> sp.csr_matrix:
+    """(K - 1, K): the random-walk prior's rows (V_j+1 - V_j) / sqrt(t_j+1 - t_j) over the K knot
+    velocities, each an N(0, q) draw for a walk of intensity sqrt(q)."""
+    K, w = knots.size, 1.0 / np.sqrt(np.diff(knots))
+    j = np.arange(K - 1)
+    return sp.csr_matrix((np.concatenate([-w, w]), (np.concatenate([j, j]), np.concatenate([j, j + 1]))), shape=(K - 1, K))
+
+
 def janus_velocity_variance(case: Case) -> np.ndarray:
     """(3,) variance of a four-beam velocity (north, east, down axes of the instrument) from the
     beams' noise (error velocity) through the Janus geometry: sigma^2 diag((B^T B)^-1)."""
@@ -826,12 +834,11 @@ class SurveyModel:
                     channels.append(Channel(k, f"reference_{NED[j]}", t_ref, (np.isfinite(v_meas[:, j]) & covered).astype(float)))
                 n_nodes += att_c.n_instructions() * L
             if run.random_walk:  # the priors: horizontal increments over sqrt(dt), vertical levels
-                dt = np.diff(run.knots)
                 t_mid = 0.5 * (run.knots[1:] + run.knots[:-1])
-                dV = ca.times(V[1:, :2] - V[:-1, :2], ca.DM(np.repeat(1.0 / np.sqrt(dt)[:, None], 2, axis=1)))
+                dV = ca.mtimes(sparse_dm(walk_increments(run.knots)), V[:, :2])
                 for j in range(2):
                     models.append(dV[:, j])
-                    channels.append(Channel(k, f"motion_{NED[j]}", t_mid, np.ones(dt.size)))
+                    channels.append(Channel(k, f"motion_{NED[j]}", t_mid, np.ones(t_mid.size)))
                 models.append(V[:, 2])  # a floating boat's vertical velocity: zero-mean heave, not a walk
                 channels.append(Channel(k, "vertical_down", run.knots, np.ones(run.knots.size)))
         if self.has_prior:  # N(0, prior^2) on B and C: a pseudo-run of its own, outside the runs' time bins
@@ -1034,12 +1041,8 @@ class SurveyModel:
         knots): the horizontal increments (V_j+1 - V_j) / sqrt(dt) (north rows, then east), and
         each knot's vertical velocity, in :meth:`_build_residuals`' order."""
         d, v, s = ca.SX.sym("d", 1), ca.SX.sym("v", 3), ca.SX.sym("s", 0)
-        K, w = knots.size, 1.0 / np.sqrt(np.diff(knots))
-        j = np.arange(K - 1)
-        increments = sp.csr_matrix((np.concatenate([-w, w]), (np.concatenate([j, j]), np.concatenate([j, j + 1]))),
-                                   shape=(K - 1, K))
-        return [(ca.Function("walk_increment_rows", [d, v, s], [v[:2]]), increments),
-                (ca.Function("walk_vertical_rows", [d, v, s], [v[2]]), sp.identity(K, format="csr"))]
+        return [(ca.Function("walk_increment_rows", [d, v, s], [v[:2]]), walk_increments(knots)),
+                (ca.Function("walk_vertical_rows", [d, v, s], [v[2]]), sp.identity(knots.size, format="csr"))]
 
     # ------------------------------------------------------------------ starting values
     def initial_x(self, params: list, angles, centre, heading_guess: float = 0.0) -> np.ndarray:

@@ -56,18 +56,10 @@ def arrow_leverages(A: sp.spmatrix, J: sp.csr_matrix, local: np.ndarray) -> np.n
     :data:`MAX_BAND` or B is not positive definite (the caller then solves)."""
     loc, glob = np.flatnonzero(local), np.flatnonzero(~local)
     A = sp.csc_matrix(A)
-    B = A[loc][:, loc].tocoo()
-    p = int(np.max(np.abs(B.row - B.col))) if B.nnz else 0
-    if p > MAX_BAND:
+    Lb = banded_cholesky(A[loc][:, loc])
+    if Lb is None:
         return None
-    n = loc.size
-    lower = B.row >= B.col
-    ab = np.zeros((p + 1, n))
-    np.add.at(ab, (B.row[lower] - B.col[lower], B.col[lower]), B.data[lower])
-    try:
-        Lb = cholesky_banded(ab, lower=True)
-    except LinAlgError:
-        return None
+    p, n = Lb.shape[0] - 1, loc.size
     zb = band_of_inverse(Lb)
     Z = sp.diags([zb[d, :n - d] for d in range(p + 1)] + [zb[d, :n - d] for d in range(1, p + 1)],
                  list(range(0, -p - 1, -1)) + list(range(1, p + 1)), shape=(n, n), format="csr")
@@ -80,6 +72,22 @@ def arrow_leverages(A: sp.spmatrix, J: sp.csr_matrix, local: np.ndarray) -> np.n
         U = J[:, glob].toarray() - JL @ BC
         h += np.sum((U @ np.linalg.pinv(S, hermitian=True)) * U, axis=1)
     return h
+
+
+def banded_cholesky(B: sp.spmatrix) -> np.ndarray | None:
+    """B's Cholesky factor L in lower banded storage (Lb[d, j] = L[j + d, j]); None when B's band
+    is wider than :data:`MAX_BAND` or B is not positive definite."""
+    B = sp.coo_matrix(B)
+    p = int(np.max(np.abs(B.row - B.col))) if B.nnz else 0
+    if p > MAX_BAND:
+        return None
+    lower = B.row >= B.col
+    ab = np.zeros((p + 1, B.shape[0]))
+    np.add.at(ab, (B.row[lower] - B.col[lower], B.col[lower]), B.data[lower])
+    try:
+        return cholesky_banded(ab, lower=True)
+    except LinAlgError:
+        return None
 
 
 def band_of_inverse(Lb: np.ndarray) -> np.ndarray:
@@ -111,16 +119,9 @@ def inverse_diagonal(A: sp.spmatrix, lu=None) -> np.ndarray:
     :data:`MAX_BAND` wide, as the velocities per ping are; else by solves against a sparse LU
     (``lu`` when the caller has factored A already: as many solves as A has rows)."""
     A = sp.csc_matrix(A)
-    C = A.tocoo()
-    p = int(np.max(np.abs(C.row - C.col))) if C.nnz else 0
-    if p <= MAX_BAND:
-        lower = C.row >= C.col
-        ab = np.zeros((p + 1, A.shape[0]))
-        np.add.at(ab, (C.row[lower] - C.col[lower], C.col[lower]), C.data[lower])
-        try:
-            return band_of_inverse(cholesky_banded(ab, lower=True))[0]
-        except LinAlgError:
-            pass
+    Lb = banded_cholesky(A)
+    if Lb is not None:
+        return band_of_inverse(Lb)[0]
     return quadratic_diagonal(lu if lu is not None else splu(A), sp.identity(A.shape[0], format="csr"))
 
 
