@@ -233,7 +233,7 @@ def read_case(path) -> "Case":
 
 
 def import_file(source, out=None, *, name: str | None = None, start_s: float | None = None,
-                end_s: float | None = None, every: int = 1) -> ImportedCase:
+                end_s: float | None = None, every: int = 1, salinity_psu: float | None = None) -> ImportedCase:
     """Import a TRDI PD0 file (or a dolfyn Dataset read from one) into a case.
 
     Parameters
@@ -253,6 +253,10 @@ def import_file(source, out=None, *, name: str | None = None, start_s: float | N
         Keep pings in this window, seconds from the file's first ping.
     every : int
         Keep every n-th ping (decimation of long files), >= 1.
+    salinity_psu : float, optional
+        The water's salinity where the instrument's setting was wrong (0 ppt entered at sea):
+        its sound speed recomputed from the recorded temperature, every radial and range rescaled
+        (:func:`adcpdyn.cases.sound_speed.with_salinity`; the change in ``/provenance``).
 
     Returns
     -------
@@ -278,6 +282,10 @@ def import_file(source, out=None, *, name: str | None = None, start_s: float | N
         from .cases.importers import import_dataset
 
         case, audit = import_dataset(source, window, name=name)
+    if salinity_psu is not None:
+        from .cases.importers import resalted
+
+        case, audit = resalted(case, audit, salinity_psu)
     imported = ImportedCase(case, audit)
     return imported if out is None else imported.write(out)
 

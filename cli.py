@@ -169,11 +169,13 @@ def _simulate_survey(args) -> int:
 def cmd_import(args) -> int:
     """A real instrument file (TRDI PD0, Nortek AD2CP) into a case file, with its audit trail."""
     from .cases.atomic import check_output_file
-    from .cases.importers import Window, import_file, write_imported
+    from .cases.importers import Window, import_file, resalted, write_imported
 
     path = Path(args.file)
     check_output_file(args.out, path)
     case, attrs = import_file(path, Window(start_s=args.start, end_s=args.end, every=args.every))
+    if args.salinity_psu is not None:
+        case, attrs = resalted(case, attrs, args.salinity_psu)
     write_imported(case, attrs, args.out, source=path)
     prov = attrs["/provenance"]
     print(f"wrote {args.out}: {case.pings.n} pings over {case.pings.time_s[-1]:.1f} s, BT from "
@@ -193,6 +195,8 @@ def cmd_import(args) -> int:
         warn(f"attitude: {warning}")
     if prov.get("reader_messages"):
         warn(prov["reader_messages"])
+    if "sound_speed_changed" in prov:
+        print(f"sound speed: {prov['sound_speed_changed']}")
     return 0
 
 
@@ -793,6 +797,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="CASE.h5 (never the input file)")
     s.add_argument("--start", type=_finite, help="first ping to keep, seconds from the file's first ping")
     s.add_argument("--end", type=_finite, help="last ping to keep, seconds from the file's first ping")
+    s.add_argument("--salinity-psu", type=_finite, help="the water's salinity (ppt) where the instrument's setting was "
+                   "wrong: its sound speed recomputed from the recorded temperature, every radial and range rescaled")
     s.add_argument("--every", type=_count, default=1, help="keep every n-th ping (decimation for long files)")
 
     s = command("info", "summarise a case file", cmd_info)

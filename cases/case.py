@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +35,8 @@ class Instrument:
     make: str = ""  # who built it ("TRDI", "Nortek"; a simulator names itself); "" when not known
     model: str = ""  # the maker's model name
     serial_number: str = ""
+    temperature_c: float | None = None  # the transducer's water temperature (median) its sound speed was computed from
+    salinity_psu: float | None = None  # the salinity setting its sound speed was computed with
 
     def beam_directions(self) -> np.ndarray:
         """Outward unit beam vectors in the transducer frame, (4, 3)."""
@@ -66,6 +69,21 @@ class Environment:
             d = np.asarray(self.water_depth_per_ping_m, dtype=float)
             return np.where(np.isnan(d), float(self.water_depth_m), d)
         return np.full(n_pings, float(self.water_depth_m))
+
+
+def depth_from_vertical_ranges(time_s, vertical_m, transducer_depth_m: float) -> np.ndarray | None:
+    """The per-ping water depth derived where none is recorded (the importers' rule): the transducer
+    depth plus the mean of the beams' vertical ranges, interpolated in time where no beam has one;
+    None without any range."""
+    vertical_m = np.asarray(vertical_m, dtype=float)
+    if not np.any(np.isfinite(vertical_m)):
+        return None
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # pings without a range: NaN, interpolated below
+        mean = np.nanmean(vertical_m, axis=1)
+    ok = np.isfinite(mean)
+    t = np.asarray(time_s, dtype=float)
+    return float(transducer_depth_m) + np.interp(t, t[ok], mean[ok])
 
 
 @dataclass(frozen=True)
@@ -221,3 +239,24 @@ class Case:
     def replace(self, **changes) -> "Case":
         """A copy with some fields replaced (``dataclasses.replace``)."""
         return dataclasses.replace(self, **changes)
+
+    def depth_from_ranges(self, tol_m: float = 1e-3) -> bool:
+        """Whether the per-ping water depth is the transducer depth plus the mean of the beams'
+        vertical ranges (slant range x |beam z|), as an importer derives it where no other depth
+        is recorded: then a uniform scale of the ranges (a wrong sound speed) scales the depth with
+        them, and the ranges tell nothing of it. True when nine pings in ten with a range agree to
+        ``tol_m``."""
+        d, derived = self.environment.water_depth_per_ping_m, self.depth_of_ranges()
+        if d is None or derived is None:
+            return False
+        seen = np.any(np.isfinite(self.pings.bt_range_m), axis=1) & np.isfinite(d)
+        return bool(seen.any() and np.mean(np.abs(np.asarray(d, dtype=float)[seen] - derived[seen]) <= tol_m) >= 0.9)
+
+    def depth_of_ranges(self) -> np.ndarray | None:
+        """The per-ping water depth the ranges give by the importers' rule (:func:`depth_from_vertical_ranges`,
+        vertical range = slant range x |beam z|); None without ranges."""
+        if self.pings.bt_range_m is None:
+            return None
+        cos_b = np.abs(self.instrument.beam_directions()[:, 2])
+        return depth_from_vertical_ranges(self.pings.time_s, np.asarray(self.pings.bt_range_m, dtype=float) * cos_b[None, :],
+                                          self.environment.transducer_depth_m)

@@ -44,6 +44,7 @@ _VESSEL_FIELDS = (
     "draft_m",
     "displaced_volume_m3",
 )
+_SOUND_SPEED_INPUTS = ("temperature_c", "salinity_psu")  # optional /instrument attributes (not in the format: ignored if unreadable)
 _UNIT_TOL = 1e-6
 _HEADING_MAX = 2.0 * math.pi + 1e-9
 
@@ -666,6 +667,15 @@ class _Reader:
         return s
 
 
+def _optional_number(v) -> float | None:
+    """An attribute the format does not define, read where it is one finite number, else None (ignored)."""
+    try:
+        x = np.asarray(v, dtype=float).ravel()
+    except (TypeError, ValueError):
+        return None
+    return float(x[0]) if x.size == 1 and np.isfinite(x[0]) else None
+
+
 def _identity_text(v) -> str:
     """An identity attribute (make, model, serial number) as text, a numeric serial included; "" when absent."""
     if v is None:
@@ -724,6 +734,7 @@ def _read(f: h5py.File, rd: _Reader) -> Case:
         beam_dirs_t=rd.dataset(g, "beam_dirs_t", required=False),
         beam_pos_t=rd.dataset(g, "beam_pos_t", required=False),
         **{k: _identity_text(rd._raw_attr(g, k, False)) for k in ("make", "model", "serial_number")},
+        **{k: _optional_number(rd._raw_attr(g, k, False)) for k in _SOUND_SPEED_INPUTS},
     )
 
     g = rd.group(root, "environment")
@@ -907,6 +918,9 @@ def _write(f: h5py.File, case: Case) -> None:
     for key in ("make", "model", "serial_number"):  # the instrument's identity (attributes the format lets producers add)
         if getattr(ins, key):
             g.attrs[key] = str(getattr(ins, key))
+    for key in _SOUND_SPEED_INPUTS:  # what its sound speed was computed from, where known
+        if getattr(ins, key) is not None:
+            g.attrs[key] = np.float64(getattr(ins, key))
     _ds(g, "beam_dirs_t", ins.beam_dirs_t)
     _ds(g, "beam_pos_t", ins.beam_pos_t)
 

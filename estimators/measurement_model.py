@@ -292,6 +292,7 @@ class RunSetup:
     navigation: str = "knots"
     samples: SampledAttitude | None = field(default=None, init=False)
     reference_rows: np.ndarray | None = field(default=None, init=False)
+    depth_from_ranges: bool = field(default=False, init=False)  # the case's depth is its ranges' (:meth:`Case.depth_from_ranges`)
 
     @property
     def random_walk(self) -> bool:
@@ -317,6 +318,7 @@ class RunSetup:
         if self.random_walk and self.knots.size < 2:
             raise ValueError("navigation: 'random_walk' needs at least two knots")
         self.reference_rows = reference_rows(self.case, self.knots)
+        self.depth_from_ranges = self.case.depth_from_ranges()
         if self.attitude_source == "samples":
             self.samples = sampled_attitude(self.case, self.fit)
 
@@ -774,19 +776,24 @@ class SurveyModel:
             V = self.knot_syms[k]
             v_ping = ca.mtimes(hat_basis_dm(pings.time_s, run.knots), V) if V is not None else ca.MX(ca.DM.zeros(N, 3))
             g_rows, beams, ypr_beams = ca.repmat(g_depth, 1, N), ca.DM(self.beam_dirs_t), self.ypr_beams
+            g_level, depth_rows = g_rows, ca.DM(depth).T
             radial_scale = range_scale = 1.0
             for e, th in terms:
                 v_ping, g_rows = e.vessel_velocity(v_ping, ctx, th), e.g_depth(g_rows, ctx, th)
                 beams = e.beam_directions(beams, case.instrument.beam_angle_rad, th)
                 ypr_beams = e.installation(ypr_beams, th)
-                radial_scale, range_scale = radial_scale * e.radial_scale(th), range_scale * e.range_scale(th)
+                radial_scale = radial_scale * e.radial_scale(th)
+                if not run.depth_from_ranges:  # else the depth derived from the ranges scales with them: the ratio stays
+                    range_scale = range_scale * e.range_scale(th)
+            if run.depth_from_ranges and g_rows is not g_level:  # a depth derived from the ranges moved with the transducer
+                depth_rows = depth_rows + (g_rows - g_level)
             bed = self.bed_at(k, N)
             beds = [b for b in (e.bottom_velocity_model(th) for e, th in terms) if b is not None]
             if beds:
                 extra_bed = ca.repmat(sum(beds[1:], beds[0]).T, N, 1)
                 bed = extra_bed if bed is None else bed + extra_bed
             v_bt = v_ping - bed if bed is not None else v_ping
-            radial, rng = fast(bt_fun).map(N)(ca.DM(pings.time_s).T, ca.DM(depth).T, g_rows, case.instrument.sound_speed_m_s,
+            radial, rng = fast(bt_fun).map(N)(ca.DM(pings.time_s).T, depth_rows, g_rows, case.instrument.sound_speed_m_s,
                                         v_bt.T, self._p_rows(k, pings.time_s), self.r, ypr_beams, beams)
             radial, rng = radial * radial_scale, rng * range_scale
             n_nodes += bt_fun.n_instructions() * N

@@ -17,7 +17,7 @@ import numpy as np
 from .reader import ImportFailure
 from .window import Window
 
-__all__ = ["ImportFailure", "Window", "detect_vendor", "import_dataset", "import_file", "write_imported"]
+__all__ = ["ImportFailure", "Window", "detect_vendor", "import_dataset", "import_file", "resalted", "write_imported"]
 
 TRDI_SUFFIXES = (".pd0", ".000", ".ens", ".enr", ".enx", ".sta", ".lta")
 NORTEK_SUFFIXES = (".ad2cp",)
@@ -65,6 +65,18 @@ def import_file(path, window: Window | None = None):
     if chatter.messages:
         attrs.setdefault("/provenance", {})["reader_messages"] = chatter.summary()
     return case, attrs
+
+
+def resalted(case, attrs: dict, salinity_psu: float) -> tuple:
+    """``(case, attrs)`` with the water's salinity in place of the instrument's setting
+    (:func:`~adcpdyn.cases.sound_speed.with_salinity`), the change in ``/provenance``."""
+    from ..sound_speed import with_salinity
+
+    new, note = with_salinity(case, salinity_psu)
+    prov = {**attrs["/provenance"], "sound_speed_changed": note}
+    if "bt_vs_gnss_speed_ratio_bt_over_gnss" in prov:  # the bottom track's speeds scale with the sound speed
+        prov["bt_vs_gnss_speed_ratio_bt_over_gnss"] *= new.instrument.sound_speed_m_s / case.instrument.sound_speed_m_s
+    return new, {**attrs, "/provenance": prov}
 
 
 def import_dataset(ds, window: Window | None = None, name: str | None = None):

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..case import Attitude, Case, Environment, Instrument, Pings, Position, Reference, format_utc
+from ..case import Attitude, Case, Environment, Instrument, Pings, Position, Reference, depth_from_vertical_ranges, format_utc
+from ...models.sound_speed import sound_speed_m_s
 from ..hashing import sha256_of
 from . import gnss, rdi_frames, rdi_water
 from .reader import ImportFailure, read_dolfyn
@@ -133,12 +134,10 @@ def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes)
     slant = rdi_frames.case_beams(vert) / np.cos(beam_angle)
 
     transducer_depth = float(np.nanmedian(depth_ed)) if np.any(np.isfinite(depth_ed)) else 0.0
-    mean_vert = np.nanmean(vert, axis=1) if np.any(np.isfinite(vert)) else None
-    if mean_vert is None:
-        raise ImportFailure(f"{path}: dist_bt: expected some valid bottom-track ranges, got none")
-    ok = np.isfinite(mean_vert)
     t_rel = t_abs - t_abs[0]
-    water_depth = transducer_depth + np.interp(t_rel, t_rel[ok], mean_vert[ok])
+    water_depth = depth_from_vertical_ranges(t_rel, vert, transducer_depth)
+    if water_depth is None:
+        raise ImportFailure(f"{path}: dist_bt: expected some valid bottom-track ranges, got none")
     frame = "transducer" if all(internal.values()) else "vessel"
     water, water_attrs = rdi_water.water_profile(ds, coord, beam_angle, convex, rot, keep, transducer_depth,
                                                  float(np.max(water_depth)), cell_sizes or ())
@@ -152,7 +151,8 @@ def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes)
         description=f"imported from {recorded} by adcpdyn import ({version})",
         instrument=Instrument(beam_angle_rad=float(beam_angle), transducer_radius_m=0.0,
                               frequency_hz=float(a["carrier_freq"]) * 1e3, sound_speed_m_s=float(np.nanmedian(c_sound)),
-                              make="TRDI", model=str(a.get("inst_model") or ""), serial_number=str(a.get("serialnum") or "")),
+                              make="TRDI", model=str(a.get("inst_model") or ""), serial_number=str(a.get("serialnum") or ""),
+                              temperature_c=_median(ds, "temp", keep), salinity_psu=_median(ds, "salinity", keep)),
         environment=Environment(water_depth_m=float(np.nanmedian(water_depth)), transducer_depth_m=transducer_depth,
                                 water_depth_per_ping_m=water_depth),
         pings=Pings(time_s=t_rel, bt_radial_m_s=radial, bt_range_m=slant),
@@ -202,6 +202,7 @@ def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes)
         "/instrument": {
             "transducer_radius_source": "not in the file: 0 (all four transducers at P)",
             "sound_speed_source": f"median of the PD0 sound speed ({np.nanmin(c_sound):.1f}-{np.nanmax(c_sound):.1f} m/s)",
+            "sound_speed_check": _sound_speed_check(ds, keep, c_sound, transducer_depth),
         },
     }
     if attitude_missing:
@@ -209,6 +210,28 @@ def _from_dataset(ds, version: str, window: Window, file, name: str, cell_sizes)
                                                   "holds no attitude (e.g. a VmDAS ENR without its navigation files); the "
                                                   "zeros are passed through as recorded and nothing that uses attitude is meaningful")
     return _with_reference(case, attrs, ds, file, t_abs)
+
+
+def _median(ds, name: str, keep) -> float | None:
+    """The median of a per-ensemble variable over the pings kept (None where the file has none)."""
+    if name not in ds:
+        return None
+    v = np.asarray(ds[name].values, dtype=np.float64)[keep]
+    return round(float(np.nanmedian(v)), 2) if np.any(np.isfinite(v)) else None  # the PD0 resolution: 0.01 deg C, 1 ppt
+
+
+def _sound_speed_check(ds, keep, c_sound, transducer_depth: float) -> str:
+    """Whether the PD0's sound speed is what TRDI's formula gives from its own temperature and salinity
+    setting (:func:`~adcpdyn.models.sound_speed.sound_speed_m_s`): computed (the salinity setting then
+    decides it) or entered by hand."""
+    T, S = _median(ds, "temp", keep), _median(ds, "salinity", keep)
+    if T is None or S is None:
+        return "not checked: no temperature or salinity in the file"
+    c = float(sound_speed_m_s(T, S, transducer_depth))
+    verdict = "computed from them" if abs(c - float(np.nanmedian(c_sound))) <= 1.0 else "not from them (set by hand?)"
+    return (f"PD0 {np.nanmedian(c_sound):.0f} m/s; Medwin's formula at the recorded {T:.2f} deg C, salinity setting {S:g} ppt, "
+            f"{transducer_depth:.1f} m: {c:.1f} m/s ({verdict}); a salinity entered wrong scales every velocity and range by "
+            "c_recorded / c_true")
 
 
 def _heading_settings(ea: float, eb: float) -> dict:

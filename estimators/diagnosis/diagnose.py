@@ -47,6 +47,7 @@ from ..statistics.hac import andrews_lags, at_least_white, newey_west, ping_bins
 from ..measurement_model import (NAVIGATION_CHOICES, EffectTerm, ModelSpec, RunSetup, choose_navigation,
                                  course_offset_rad, heading_centre, knot_times, ping_knots)
 from . import where as where_mod
+from .readings import sound_speed_reading
 from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
 from ..statistics.normal_equations import (as_sparse, group_levels, inverse_columns, leave_out_predictions,
                                           marginal_covariance, redundancy)
@@ -743,6 +744,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             return _delay_profile(base, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
         model = GapModel(base, terms, peaks, solver=config.solver)
         pinned = _pinned_effect_parameters(model, base)
+        if base_model.random_walk:  # unknowns that scale the velocities: by the marginal likelihood, held where it put them
+            scaled = [n for n in model.names if n.endswith(VELOCITY_SCALES)]
+            mine = [n for n in scaled if n.split("/")[-1].split(".")[0] == name]
+            pinned.update({n: float(values[n]) for n in scaled if n not in mine and n in values})
+            if len(mine) == 1:
+                return _marginal_profile(model, mine[0], values, start_fit.sigma, pinned)
         extra = [o for t in _terms(base, name) for o in t.effect.extra_starts()]
         starts = [model.start(values)] + [model.start(values, _renamed(model, o)) for o in extra]
         best = None
@@ -844,7 +851,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         if close:
             alternatives.append({"chosen": best.effect, "round": round_, "shrink": best.shrink_fraction,
                                  "delta_bic": best.delta_bic,
-                                 "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic}
+                                 "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
+                                                   **({"reading": _reading(s, cases)} if _reading(s, cases) else {})}
                                                   for s in close]})
         selected.append(best.effect)
         selected_terms += _terms(base, best.effect)
@@ -893,7 +901,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                       f"{'s' if len(a['alternatives']) == 1 else ''} nearly as much as {a['chosen']} ("
                       + ", ".join(f"shrink {100 * x['shrink']:.0f}%" for x in a["alternatives"])
                       + f" vs {100 * a['shrink']:.0f}%): these data hardly tell them apart, so read "
-                      f"{a['chosen']} as the likeliest of them, not as proven")
+                      f"{a['chosen']} as the likeliest of them, not as proven"
+                      + "".join(f" ({x['effect']}: {x['reading']['text']})" for x in a["alternatives"] if "reading" in x))
+    for sc in chosen if selected else []:
+        if _reading(sc, cases):
+            statement += f"; {sc.effect}: {_reading(sc, cases)['text']}"
     if given:
         statement = ("on top of the run's own " + ", ".join(f"{n} = {v['value']:.4g} +- {v['se']:.2g}" for n, v in given.items())
                      + ": " + statement)
@@ -926,13 +938,25 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     return DiagnosisResult(
         case=", ".join(c.name for c in cases), verdict=verdict, statement=statement, gap_before=float(gap_before),
         gap_after=float(gap_after), gap_z_before=float(z_before), gap_z_after=float(z_after),
-        remaining_gap_significant=bool(remaining), where=where, ranking=[r.to_dict() for r in ranking],
+        remaining_gap_significant=bool(remaining), where=where,
+        ranking=[{**r.to_dict(), **({"reading": _reading(r, cases)} if _reading(r, cases) else {})} for r in ranking],
         noise={_key_name(base_model, k): v for k, v in noise.items()}, base=base_info,
         velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, given=given,
         given_covariance=given_covariance,
         confounded=confounded,
         alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
+
+
+def _reading(score: EffectScore, cases: list) -> dict | None:
+    """A sound-speed error's estimate in the field's terms (:func:`.readings.sound_speed_reading`):
+    the water's sound speed, and the salinity that gives it at the recorded temperature."""
+    key = "sound_speed_error.relative_error"
+    if score.effect != "sound_speed_error" or key not in score.params:
+        return None
+    ins = cases[0].instrument
+    return sound_speed_reading(ins.sound_speed_m_s, score.params[key], score.params_se.get(key, float("nan")),
+                               ins.temperature_c, ins.salinity_psu, cases[0].environment.transducer_depth_m)
 
 
 RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects on quantities a calibration fits
@@ -1123,6 +1147,51 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
     model, fit = settled(kept[best], tried[best], best)
     name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
     fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
+    return model, fit
+
+
+VELOCITY_SCALES = ("sound_speed_error.relative_error", "beam_angle_error.error_rad")  # unknowns scaling the beams' velocities
+PROFILE_REFINEMENTS = 3
+
+
+def _marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pinned: dict):
+    """(model, fit) at the maximum of the likelihood marginal over the per-ping velocities in the
+    unknown ``name``, which scales the velocities the beams see (a sound speed, a beam angle): the
+    joint fit the NLP minimises rewards a smaller velocity path, whose walk's rows shrink (winriver01,
+    recorded at sea with a salinity setting of 0 ppt: the joint fit puts the sound speed 3.7 % low, the
+    marginal 2.8 % high, the salinity's error). Each point is a fit with the unknown held; parabolas
+    through the three best points, from 0 and +- the unknown's scale, then at each vertex, give the
+    maximum, and their curvature its standard error (``Fit.profile_se``; NaN where it does not curve down)."""
+    i = model.names.index(name)
+    lo, hi, step = float(model.lbx[i]), float(model.ubx[i]), float(model.scale[i])
+    fits = {}
+
+    def visit(v: float) -> None:
+        v = float(np.clip(v, lo, hi))
+        if v not in fits:
+            near = min(fits, key=lambda u: abs(u - v)) if fits else None
+            x = fits[near][0].values if near is not None else values
+            f = model.solve(model.start(x, {name: v}), sigma, fixed={**pinned, name: v})
+            fits[v] = (f, f.log_likelihood(model))
+
+    def parabola():  # through the three points nearest the best: (best, curvature, slope, their width)
+        best = max(fits, key=lambda u: fits[u][1])
+        three = sorted(sorted(fits, key=lambda u: abs(u - best))[:3])
+        curvature, slope, _ = np.polyfit(np.array(three) - best, [fits[u][1] for u in three], 2)
+        return best, curvature, slope, max(three) - min(three)
+
+    for v in (0.0, -step, step):
+        visit(v)
+    for _ in range(PROFILE_REFINEMENTS):
+        best, curvature, slope, width = parabola()
+        vertex = best + (float(np.clip(-slope / (2 * curvature), -width, width)) if curvature < 0 else
+                         float(np.sign(slope) * width))  # no maximum between them: walk on up the slope
+        if abs(vertex - best) < 1e-3 * step:
+            break
+        visit(vertex)
+    best, curvature, _, _ = parabola()
+    fit = fits[best][0]
+    fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 else float("nan")}
     return model, fit
 
 

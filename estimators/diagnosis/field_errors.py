@@ -12,6 +12,7 @@ import dataclasses
 import numpy as np
 
 from ...cases.case import Case
+from ...cases.sound_speed import rescale_sound_speed
 from ..measurement_model import has_moving_reference
 
 FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
@@ -102,13 +103,18 @@ def inject(case: Case, error: str, size: float, course_rad: float | None = None)
     - reference_latency_s: reference velocities stamped ``size`` late;
     - moving_bed_m_s: a bed moving at ``size`` across the mean course (to its left; ``course_rad``,
       default the run's own): the bottom track sees v - u, so the reference, which sees v, gets + u;
-    - sound_speed_relative: radials and slant ranges scaled by 1 + size (the instrument's sound
-      speed off by that fraction);
+    - sound_speed_relative: radials (bottom track and water), slant ranges and cell distances scaled
+      by 1 + size (the instrument's sound speed off by that fraction,
+      :func:`~adcpdyn.cases.sound_speed.rescale_sound_speed`);
     - tilt_lowpass_s: pitch and roll samples read through a first-order low-pass of time constant
       ``size`` (exact for a signal linear between samples);
     - heave_m_s: the boat heaving at :data:`HEAVE_OMEGA_RAD_S` with vertical velocity amplitude
       ``size`` (down positive): every radial gains w cos(beam angle), every slant range loses
       z / cos(beam angle) (the beams' tilt, a few degrees, neglected: cos 4 deg = 0.998).
+
+    Where the run's water depth is derived from its ranges (an imported file), it is derived again
+    from the changed ranges, as importing the erroneous file would: a uniform change of the ranges
+    then moves the depth with them, and only what differs between the beams is left in the ranges.
     """
     if error not in FIELD_ERRORS:
         raise ValueError(f"error: expected one of {sorted(FIELD_ERRORS)}, got {error!r}")
@@ -119,10 +125,9 @@ def inject(case: Case, error: str, size: float, course_rad: float | None = None)
         return case.replace(attitude=dataclasses.replace(att, heading_rad=att.heading_rad + np.radians(size)))
     if error == "attitude_latency_s":
         return case.replace(attitude=dataclasses.replace(att, time_s=att.time_s + size))
-    if error == "sound_speed_relative":
-        p = case.pings
-        rng = None if p.bt_range_m is None else p.bt_range_m * (1 + size)
-        return case.replace(pings=dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s * (1 + size), bt_range_m=rng))
+    if error == "sound_speed_relative":  # recorded with the instrument's sound speed x (1 + size)
+        recorded = rescale_sound_speed(case, 1 + size)
+        return recorded.replace(instrument=case.instrument)  # the instrument still believes its own sound speed
     if error == "tilt_lowpass_s":
         return case.replace(attitude=dataclasses.replace(att, pitch_rad=lowpass(att.time_s, att.pitch_rad, size),
                                                          roll_rad=lowpass(att.time_s, att.roll_rad, size)))
@@ -132,12 +137,23 @@ def inject(case: Case, error: str, size: float, course_rad: float | None = None)
         w = size * np.cos(HEAVE_OMEGA_RAD_S * t)
         c = np.cos(case.instrument.beam_angle_rad)
         rng = None if p.bt_range_m is None else p.bt_range_m - (z / c)[:, None]
-        return case.replace(pings=dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s + (w * c)[:, None], bt_range_m=rng))
+        return _with_ranges(case, dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s + (w * c)[:, None], bt_range_m=rng))
     if error == "reference_latency_s":
         return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
     u = size * np.append(_across(survey_course(case) if course_rad is None else course_rad), 0.0)
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
+
+
+def _with_ranges(case: Case, pings) -> Case:
+    """``case`` with new pings; a water depth derived from the old ranges (:meth:`Case.depth_from_ranges`)
+    derived again from the new ones, as importing the file that recorded them would."""
+    new = case.replace(pings=pings)
+    if not case.depth_from_ranges():
+        return new
+    depth = new.depth_of_ranges()
+    return new.replace(environment=dataclasses.replace(case.environment, water_depth_per_ping_m=depth,
+                                                       water_depth_m=float(np.nanmedian(depth))))
 
 
 def lowpass(t: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:

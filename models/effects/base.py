@@ -150,6 +150,8 @@ class Effect:
         return 1.0
 
     def range_scale(self, th):
+        """The slant ranges' factor against a depth known otherwise (a run whose depth is derived from
+        its ranges takes none: the depth scales with them)."""
         return 1.0
 
     def vessel_velocity(self, v, ctx, th):

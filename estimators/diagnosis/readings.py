@@ -1,0 +1,33 @@
+"""What a named effect's estimate means in the field's terms: a sound-speed error as the water's
+sound speed and the salinity (or temperature) that gives it, beside the setting the instrument used."""
+
+from __future__ import annotations
+
+from ...models.sound_speed import salinity_for_sound_speed, temperature_for_sound_speed
+
+
+def sound_speed_reading(c_instrument_m_s: float, relative_error: float, se: float, temperature_c: float | None,
+                        salinity_psu: float | None, depth_m: float = 0.0) -> dict:
+    """The water's sound speed c_instrument (1 + relative_error) +- c_instrument se, and where the
+    instrument recorded the temperature and salinity setting its sound speed came from, the salinity
+    (+- SE) that gives that speed at the recorded temperature and the temperature that gives it at the
+    recorded salinity (:mod:`adcpdyn.models.sound_speed`); ``text`` says it in one clause."""
+    c = c_instrument_m_s * (1.0 + relative_error)
+    out = {"instrument_sound_speed_m_s": c_instrument_m_s, "sound_speed_m_s": c, "sound_speed_se_m_s": c_instrument_m_s * se,
+           "recorded_temperature_c": temperature_c, "salinity_setting_psu": salinity_psu,
+           "salinity_psu": None, "salinity_se_psu": None, "temperature_c": None}
+    text = (f"the water's sound speed {c:.0f} +- {c_instrument_m_s * se:.0f} m/s against the instrument's "
+            f"{c_instrument_m_s:.0f}")
+    if temperature_c is not None and salinity_psu is not None:
+        out["salinity_psu"] = float(salinity_for_sound_speed(c, temperature_c, depth_m))
+        out["salinity_se_psu"] = c_instrument_m_s * se / (1.34 - 0.01 * temperature_c)  # dc/dS of the formula
+        out["temperature_c"] = temperature_for_sound_speed(c, salinity_psu, depth_m)
+        text += (f" (computed from {temperature_c:.1f} deg C and a salinity setting of {salinity_psu:g} ppt): "
+                 f"a salinity of {out['salinity_psu']:.0f} +- {out['salinity_se_psu']:.0f} ppt at that temperature")
+        if out["temperature_c"] is not None:
+            text += f", or {out['temperature_c']:.1f} deg C at that salinity"
+        text += "; if so, re-import with `--salinity-psu` set to the water's"
+    else:
+        text += " (the file records no temperature and salinity setting to read it as a salinity)"
+    out["text"] = text
+    return out
