@@ -39,7 +39,10 @@ def summarise(case: Case) -> str:
     lines = [
         f"case         {case.name}: {case.description}",
         f"instrument   {ins.layout}, beam angle {np.rad2deg(ins.beam_angle_rad):.2f} deg, "
-        f"f0 {ins.frequency_hz / 1e3:.1f} kHz, c {ins.sound_speed_m_s:.1f} m/s, tr {ins.transducer_radius_m * 100:.2f} cm"
+        f"f0 {ins.frequency_hz / 1e3:.1f} kHz, c {ins.sound_speed_m_s:.1f} m/s"
+        + (f" (from {ins.temperature_c:.2f} deg C, salinity setting {ins.salinity_psu:g} ppt)"
+           if ins.temperature_c is not None and ins.salinity_psu is not None else "")
+        + f", tr {ins.transducer_radius_m * 100:.2f} cm"
         + (", custom beam vectors" if ins.beam_dirs_t is not None else ""),
         f"environment  water depth {env.water_depth_m:.2f} m"
         + (" (per ping)" if env.water_depth_per_ping_m is not None else "")

@@ -175,3 +175,25 @@ def test_winriver01_reads_the_salinity_of_its_sea():
     value, se = row["params"]["sound_speed_error.relative_error"], row["params_se"]["sound_speed_error.relative_error"]
     assert abs(value - truth) < 2 * se and se < 0.015
     assert 20 < row["reading"]["salinity_psu"] < 40
+
+
+def test_import_with_the_waters_salinity(tmp_path, capsys):
+    """`adcpdyn import --salinity-psu`: the case holds the new setting and sound speed, its
+    provenance what changed, and the BT/GNSS speed ratio scaled with the velocities."""
+    import h5py
+
+    from adcpdyn.cases.io import read_case
+    from adcpdyn.cli import main
+
+    out = tmp_path / "w1.h5"
+    assert main(["import", str(real("winriver01.PD0")), "--salinity-psu", "31", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "sound speed: salinity setting 0 -> 31 ppt" in printed
+    case = read_case(out)
+    assert case.instrument.salinity_psu == 31.0
+    # the recorded 1415 m/s (the PD0's whole m/s) times the formula's ratio: the formula's value to that rounding
+    assert case.instrument.sound_speed_m_s == pytest.approx(sound_speed_m_s(case.instrument.temperature_c, 31.0,
+                                                                            case.environment.transducer_depth_m), abs=1.0)
+    with h5py.File(out) as f:
+        assert "x 1.02" in f["provenance"].attrs["sound_speed_changed"]
+        assert 0.99 < f["provenance"].attrs["bt_vs_gnss_speed_ratio_bt_over_gnss"] < 1.01

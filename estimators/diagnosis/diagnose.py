@@ -737,6 +737,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             raise ValueError(f"given: {name} cannot be fitted on this base ({why})")
     against = [n for n in base_model.names if n.startswith(PLATFORM)]
 
+    profile_hints = {}  # a velocity scale's maximum and SE from its last profile
+
     def refit(selected_terms, name, start_fit):
         terms = selected_terms + _terms(base, name)
         values = start_fit.values
@@ -748,8 +750,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             scaled = [n for n in model.names if n.endswith(VELOCITY_SCALES)]
             mine = [n for n in scaled if n.split("/")[-1].split(".")[0] == name]
             pinned.update({n: float(values[n]) for n in scaled if n not in mine and n in values})
-            if len(mine) == 1:
-                return _marginal_profile(model, mine[0], values, start_fit.sigma, pinned)
+            if len(mine) == 1:  # started about an earlier round's maximum, where there is one
+                model, fit = _marginal_profile(model, mine[0], values, start_fit.sigma, pinned, config, terms, peaks,
+                                               profile_hints.get(mine[0]))
+                if np.isfinite(fit.profile_se[mine[0]]):
+                    profile_hints[mine[0]] = (float(fit.x[model.names.index(mine[0])]), fit.profile_se[mine[0]])
+                return model, fit
         extra = [o for t in _terms(base, name) for o in t.effect.extra_starts()]
         starts = [model.start(values)] + [model.start(values, _renamed(model, o)) for o in extra]
         best = None
@@ -1152,16 +1158,21 @@ def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profil
 
 VELOCITY_SCALES = ("sound_speed_error.relative_error", "beam_angle_error.error_rad")  # unknowns scaling the beams' velocities
 PROFILE_REFINEMENTS = 3
+PROFILE_SE_SHARE = 0.25  # the profile's maximum located to this share of its SE
 
 
-def _marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pinned: dict):
+def _marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pinned: dict, config: DiagnosisConfig,
+                      terms: list, peaks, around: tuple | None = None):
     """(model, fit) at the maximum of the likelihood marginal over the per-ping velocities in the
     unknown ``name``, which scales the velocities the beams see (a sound speed, a beam angle): the
     joint fit the NLP minimises rewards a smaller velocity path, whose walk's rows shrink (winriver01,
     recorded at sea with a salinity setting of 0 ppt: the joint fit puts the sound speed 3.7 % low, the
     marginal 2.8 % high, the salinity's error). Each point is a fit with the unknown held; parabolas
-    through the three best points, from 0 and +- the unknown's scale, then at each vertex, give the
-    maximum, and their curvature its standard error (``Fit.profile_se``; NaN where it does not curve down)."""
+    through the three points nearest the best, from 0 and +- the unknown's scale (or ``around``: an
+    earlier profile's maximum and SE, the first points there and +- the SE), then at each vertex
+    until it moves by less than :data:`PROFILE_SE_SHARE` of the SE, give the maximum, and the last
+    one's curvature its standard error (``Fit.profile_se``; NaN where it does not curve down); the
+    model at the maximum is taken to its delays' fixed point (:func:`_fixed_points`)."""
     i = model.names.index(name)
     lo, hi, step = float(model.lbx[i]), float(model.ubx[i]), float(model.scale[i])
     fits = {}
@@ -1180,17 +1191,19 @@ def _marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pin
         curvature, slope, _ = np.polyfit(np.array(three) - best, [fits[u][1] for u in three], 2)
         return best, curvature, slope, max(three) - min(three)
 
-    for v in (0.0, -step, step):
+    centre, half = around if around is not None else (0.0, step)
+    half = max(half, 0.1 * step)
+    for v in (centre, centre - half, centre + half):
         visit(v)
     for _ in range(PROFILE_REFINEMENTS):
         best, curvature, slope, width = parabola()
         vertex = best + (float(np.clip(-slope / (2 * curvature), -width, width)) if curvature < 0 else
                          float(np.sign(slope) * width))  # no maximum between them: walk on up the slope
-        if abs(vertex - best) < 1e-3 * step:
-            break
+        if curvature < 0 and abs(vertex - best) < PROFILE_SE_SHARE / np.sqrt(-2.0 * curvature):
+            break  # the maximum is located well within its standard error
         visit(vertex)
     best, curvature, _, _ = parabola()
-    fit = fits[best][0]
+    model, fit = _fixed_points(model.base, terms, peaks, config, model, fits[best][0], {**pinned, name: best})
     fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 else float("nan")}
     return model, fit
 
