@@ -252,6 +252,16 @@ class Case:
         seen = np.any(np.isfinite(self.pings.bt_range_m), axis=1) & np.isfinite(d)
         return bool(seen.any() and np.mean(np.abs(np.asarray(d, dtype=float)[seen] - derived[seen]) <= tol_m) >= 0.9)
 
+    def with_recorded_pings(self, pings: Pings) -> "Case":
+        """A copy with ``pings`` as recorded; a water depth derived from the old ranges
+        (:meth:`depth_from_ranges`) derived again from the new ones, as importing them would."""
+        new = self.replace(pings=pings)
+        if not self.depth_from_ranges():
+            return new
+        depth = new.depth_of_ranges()
+        return new.replace(environment=dataclasses.replace(self.environment, water_depth_per_ping_m=depth,
+                                                           water_depth_m=float(np.nanmedian(depth))))
+
     def depth_of_ranges(self) -> np.ndarray | None:
         """The per-ping water depth the ranges give by the importers' rule (:func:`depth_from_vertical_ranges`,
         vertical range = slant range x |beam z|); None without ranges."""

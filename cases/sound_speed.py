@@ -22,20 +22,14 @@ def rescale_sound_speed(case: Case, factor: float) -> Case:
     """``case`` recorded with the instrument's sound speed times ``factor`` (see module docstring)."""
     if not np.isfinite(factor) or factor <= 0:
         raise ValueError(f"sound speed factor: expected a finite positive number, got {factor!r}")
-    p, w, env = case.pings, case.water, case.environment
-    derived = case.depth_from_ranges()
-    out = case.replace(
-        instrument=dataclasses.replace(case.instrument, sound_speed_m_s=case.instrument.sound_speed_m_s * factor),
-        pings=dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s * factor,
-                                  bt_range_m=None if p.bt_range_m is None else p.bt_range_m * factor))
+    p, w = case.pings, case.water
+    out = case.with_recorded_pings(dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s * factor,
+                                                       bt_range_m=None if p.bt_range_m is None else p.bt_range_m * factor))
+    out = out.replace(instrument=dataclasses.replace(case.instrument, sound_speed_m_s=case.instrument.sound_speed_m_s * factor))
     if w is not None:
-        z = env.transducer_depth_m
+        z = case.environment.transducer_depth_m
         out = out.replace(water=dataclasses.replace(w, radial_m_s=w.radial_m_s * factor,
                                                     cell_depth_m=z + (w.cell_depth_m - z) * factor))
-    if derived:
-        depth = out.depth_of_ranges()
-        out = out.replace(environment=dataclasses.replace(env, water_depth_per_ping_m=depth,
-                                                          water_depth_m=float(np.nanmedian(depth))))
     return out
 
 

@@ -858,8 +858,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             alternatives.append({"chosen": best.effect, "round": round_, "shrink": best.shrink_fraction,
                                  "delta_bic": best.delta_bic,
                                  "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
-                                                   **({"reading": _reading(s, cases)} if _reading(s, cases) else {})}
-                                                  for s in close]})
+                                                   **_reading_of(s, cases)} for s in close]})
         selected.append(best.effect)
         selected_terms += _terms(base, best.effect)
         current_name = tried[best.effect][0]
@@ -910,8 +909,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                       f"{a['chosen']} as the likeliest of them, not as proven"
                       + "".join(f" ({x['effect']}: {x['reading']['text']})" for x in a["alternatives"] if "reading" in x))
     for sc in chosen if selected else []:
-        if _reading(sc, cases):
-            statement += f"; {sc.effect}: {_reading(sc, cases)['text']}"
+        statement += "".join(f"; {sc.effect}: {r['text']}" for r in _reading_of(sc, cases).values())
     if given:
         statement = ("on top of the run's own " + ", ".join(f"{n} = {v['value']:.4g} +- {v['se']:.2g}" for n, v in given.items())
                      + ": " + statement)
@@ -945,7 +943,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         case=", ".join(c.name for c in cases), verdict=verdict, statement=statement, gap_before=float(gap_before),
         gap_after=float(gap_after), gap_z_before=float(z_before), gap_z_after=float(z_after),
         remaining_gap_significant=bool(remaining), where=where,
-        ranking=[{**r.to_dict(), **({"reading": _reading(r, cases)} if _reading(r, cases) else {})} for r in ranking],
+        ranking=[{**r.to_dict(), **_reading_of(r, cases)} for r in ranking],
         noise={_key_name(base_model, k): v for k, v in noise.items()}, base=base_info,
         velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, given=given,
         given_covariance=given_covariance,
@@ -963,6 +961,12 @@ def _reading(score: EffectScore, cases: list) -> dict | None:
     ins = cases[0].instrument
     return sound_speed_reading(ins.sound_speed_m_s, score.params[key], score.params_se.get(key, float("nan")),
                                ins.temperature_c, ins.salinity_psu, cases[0].environment.transducer_depth_m)
+
+
+def _reading_of(score: EffectScore, cases: list) -> dict:
+    """``{"reading": ...}`` where the effect's estimate has a reading in the field's terms, else empty."""
+    reading = _reading(score, cases)
+    return {"reading": reading} if reading else {}
 
 
 RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects on quantities a calibration fits

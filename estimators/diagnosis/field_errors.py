@@ -137,23 +137,12 @@ def inject(case: Case, error: str, size: float, course_rad: float | None = None)
         w = size * np.cos(HEAVE_OMEGA_RAD_S * t)
         c = np.cos(case.instrument.beam_angle_rad)
         rng = None if p.bt_range_m is None else p.bt_range_m - (z / c)[:, None]
-        return _with_ranges(case, dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s + (w * c)[:, None], bt_range_m=rng))
+        return case.with_recorded_pings(dataclasses.replace(p, bt_radial_m_s=p.bt_radial_m_s + (w * c)[:, None], bt_range_m=rng))
     if error == "reference_latency_s":
         return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
     u = size * np.append(_across(survey_course(case) if course_rad is None else course_rad), 0.0)
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
-
-
-def _with_ranges(case: Case, pings) -> Case:
-    """``case`` with new pings; a water depth derived from the old ranges (:meth:`Case.depth_from_ranges`)
-    derived again from the new ones, as importing the file that recorded them would."""
-    new = case.replace(pings=pings)
-    if not case.depth_from_ranges():
-        return new
-    depth = new.depth_of_ranges()
-    return new.replace(environment=dataclasses.replace(case.environment, water_depth_per_ping_m=depth,
-                                                       water_depth_m=float(np.nanmedian(depth))))
 
 
 def lowpass(t: np.ndarray, x: np.ndarray, tau_s: float) -> np.ndarray:
