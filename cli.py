@@ -383,6 +383,11 @@ def _calibration_config(args, formulation=None, one=True):
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "
                          f"{args.moving_bed} (drop it, or use --moving-bed section)")
+    prior_deg = getattr(args, "compass_deviation_prior_deg", None)
+    if prior_deg is not None and args.compass_deviation != "auto":
+        raise ValueError(f"--compass-deviation-prior-deg {prior_deg:g}: the prior of --compass-deviation auto, not of "
+                         f"--compass-deviation {args.compass_deviation} (drop it, or use --compass-deviation auto)")
+    prior = {} if prior_deg is None else {"compass_deviation_prior_rad": float(np.deg2rad(prior_deg))}
     from .solvers.multistart import SolverOptions
 
     declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
@@ -396,6 +401,7 @@ def _calibration_config(args, formulation=None, one=True):
                              jacobian=args.jacobian, compile=args.compile, attitude=args.attitude,
                              moving_bed=args.moving_bed,
                              navigation=args.navigation, moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
+                             **prior,
                              standard_errors=args.standard_errors, magnetic_declination_rad=declination,
                              solver=SolverOptions(method=args.solver))
 
@@ -717,6 +723,13 @@ def _angle_deg(text: str) -> float:
     return value
 
 
+def _deviation_prior_deg(text: str) -> float:
+    value = _finite(text)
+    if not 0.0 < value <= np.rad2deg(0.5):
+        raise argparse.ArgumentTypeError(f"expected a standard deviation in degrees within (0, 28.6], got {text!r}")
+    return value
+
+
 def _finite(text: str) -> float:
     try:
         value = float(text)
@@ -878,6 +891,9 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--compass-deviation", default="auto", choices=["auto", "on", "off"],
                        help="head sensor: add B sin(heading) + C cos(heading) to the misalignment (auto: with a prior, "
                             "when the headings span enough)")
+        s.add_argument("--compass-deviation-prior-deg", type=_deviation_prior_deg, default=None,
+                       help="--compass-deviation auto: the one-cycle deviation left after the compass's own calibration, "
+                            "one standard deviation of B and of C in degrees (default 1: the prior N(0, 1 deg^2) each)")
         s.add_argument("--standard-errors", default="hac", choices=["hac", "white"],
                        help="hac (Newey-West sandwich, coloured residuals) or white")
         s.add_argument("--declination-deg", type=_angle_deg,

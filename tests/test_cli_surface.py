@@ -9,6 +9,7 @@ import os
 from importlib.metadata import version
 
 import h5py
+import numpy as np
 import pytest
 
 import adcpdyn
@@ -190,6 +191,10 @@ def test_contradicting_options_and_wrong_files_are_refused_in_one_line_naming_th
         ("calibrate", str(case), "--out", f"{out}.h5"): "--out: expected a CALIB.json file name ending in .json",
         ("calibrate", str(case), "--declination-deg", "400", "--out", f"{out}.json"): "--declination-deg: expected an angle in degrees within +-180",
         ("calibrate", str(case), "--moving-bed", "off", "--bed-knots", "5", "--out", f"{out}.json"): "--bed-knots 5: sets the values of --moving-bed section",
+        ("calibrate", str(case), "--compass-deviation", "off", "--compass-deviation-prior-deg", "2", "--out", f"{out}.json"):
+            "--compass-deviation-prior-deg 2: the prior of --compass-deviation auto",
+        ("calibrate", str(case), "--compass-deviation-prior-deg", "0", "--out", f"{out}.json"):
+            "--compass-deviation-prior-deg: expected a standard deviation in degrees within (0, 28.6]",
         ("calibrate", "--joint", str(case), str(case), "--method", "two-stage", "--out", f"{out}.json"): "--method two-stage: the paper's two-stage baseline",
         ("correct", str(case), "--out", f"{out}.csv"): "--out: expected OUT.h5",
         ("diagnose", "--selftest", "3", str(case)): "--selftest 3 simulates its own cases",
@@ -227,3 +232,15 @@ def test_a_reader_that_stops_reading_ends_the_command_quietly():
     proc.stdout.close()  # the reader is gone before the first line
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 128 + signal.SIGPIPE and err == ""
+
+
+def test_compass_deviation_prior_flag_sets_the_calibrations_prior():
+    """`--compass-deviation-prior-deg` is the prior's SD of B and C in degrees; without it the
+    calibration's default (1 deg)."""
+    from adcpdyn.cli import _calibration_config, build_parser
+    from adcpdyn.estimators.calibration.problem import CalibrationConfig
+
+    parse = lambda *more: build_parser().parse_args(["calibrate", "m.h5", "--out", "c.json", *more])
+    assert _calibration_config(parse("--compass-deviation-prior-deg", "0.5")).compass_deviation_prior_rad == \
+        pytest.approx(np.deg2rad(0.5))
+    assert _calibration_config(parse()).compass_deviation_prior_rad == CalibrationConfig().compass_deviation_prior_rad
