@@ -197,6 +197,11 @@ class DiagnosisResult:
 
 
 # ---------------------------------------------------------------------------- numbers
+def effect_of(unknown: str) -> str:
+    """The catalog effect an effect unknown belongs to (``run2/moving_bed.velocity_north_m_s`` -> ``moving_bed``)."""
+    return unknown.split("/")[-1].split(".")[0]
+
+
 def _key_name(model: GapModel, key) -> str:
     return key[1] if model.n_runs == 1 else f"{model.base.runs[key[0]].case.name}/{key[1]}"
 
@@ -604,7 +609,7 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
     dbic = -2.0 * dll + k * np.log(n_obs)
     gap_after, _ = _gap(model, cv, noise)
     shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
-    mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
+    mine = [n for n in model.effect_names if effect_of(n) == name]
     idx = [model.names.index(n) for n in mine]
     values = {n: float(fit.x[i]) for n, i in zip(mine, idx)}
     colour = _colour_factor(model, fit, ref_model, ref_fit, noise)
@@ -748,7 +753,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         pinned = _pinned_effect_parameters(model, base)
         if base_model.random_walk:  # unknowns that scale the velocities: by the marginal likelihood, held where it put them
             scaled = [n for n in model.names if n.endswith(VELOCITY_SCALES)]
-            mine = [n for n in scaled if n.split("/")[-1].split(".")[0] == name]
+            mine = [n for n in scaled if effect_of(n) == name]
             pinned.update({n: float(values[n]) for n in scaled if n not in mine and n in values})
             if len(mine) == 1:  # started about an earlier round's maximum, where there is one
                 model, fit = _marginal_profile(model, mine[0], values, start_fit.sigma, pinned, config, terms, peaks,
@@ -834,7 +839,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         for name, (label, model, f) in tried.items():
             s = _score(name, model, f, current[0], current[1], ref_gap, cv[label], cv[current_name], noise, n_obs,
                        config, round_)
-            mine = [n for n in model.effect_names if n.split("/")[-1].split(".")[0] == name]
+            mine = [n for n in model.effect_names if effect_of(n) == name]
             others = against + [n for n in model.effect_names if n not in mine]
             s.confounded_with, s.confounded_share = _confounding(model, f, mine, others, config.confounded_share)
             s.significant = significant(s, ref_gap, config, walk)
@@ -952,21 +957,16 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
 
 
-def _reading(score: EffectScore, cases: list) -> dict | None:
-    """A sound-speed error's estimate in the field's terms (:func:`.readings.sound_speed_reading`):
-    the water's sound speed, and the salinity that gives it at the recorded temperature."""
+def _reading_of(score: EffectScore, cases: list) -> dict:
+    """``{"reading": ...}``: a sound-speed error's estimate in the field's terms
+    (:func:`.readings.sound_speed_reading`: the water's sound speed, and the salinity that gives it at
+    the recorded temperature); empty for other effects."""
     key = "sound_speed_error.relative_error"
     if score.effect != "sound_speed_error" or key not in score.params:
-        return None
+        return {}
     ins = cases[0].instrument
-    return sound_speed_reading(ins.sound_speed_m_s, score.params[key], score.params_se.get(key, float("nan")),
-                               ins.temperature_c, ins.salinity_psu, cases[0].environment.transducer_depth_m)
-
-
-def _reading_of(score: EffectScore, cases: list) -> dict:
-    """``{"reading": ...}`` where the effect's estimate has a reading in the field's terms, else empty."""
-    reading = _reading(score, cases)
-    return {"reading": reading} if reading else {}
+    return {"reading": sound_speed_reading(ins.sound_speed_m_s, score.params[key], score.params_se.get(key, float("nan")),
+                                           ins.temperature_c, ins.salinity_psu, cases[0].environment.transducer_depth_m)}
 
 
 RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects on quantities a calibration fits

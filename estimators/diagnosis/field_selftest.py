@@ -16,7 +16,7 @@ import numpy as np
 from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
 from ...models.effects import get_effect
-from .diagnose import DiagnosisConfig, diagnose
+from .diagnose import DiagnosisConfig, diagnose, effect_of
 from ..measurement_model import has_moving_reference
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey, shift_signature
 from .signal_limit import own_delay_profile, signal_limit
@@ -128,7 +128,7 @@ def _own_effects(case, config: DiagnosisConfig, calibration, first) -> tuple:
         r = diagnose(case, dataclasses.replace(config, given=own), calibration=calibration)
     values = {}
     for name, v in r.given.items():  # full names: a survey's per-run effects (its beds) one per run
-        entry = values.setdefault(name.split("/")[-1].split(".")[0], {"params": {}, "params_se": {}})
+        entry = values.setdefault(effect_of(name), {"params": {}, "params_se": {}})
         entry["params"][name], entry["params_se"][name] = v["value"], v["se"]
     for entry in values.values():
         full = list(entry["params"])
