@@ -22,13 +22,18 @@ def sound_speed_m_s(temperature_c, salinity_psu, depth_m=0.0):
     T in deg C, S in ppt (PSU), D in m; within 0.2 m/s of the UNESCO equation for 0-35 deg C,
     0-45 ppt, 0-1000 m."""
     T = temperature_c
-    return 1449.2 + 4.6 * T - 0.055 * T ** 2 + 0.00029 * T ** 3 + (1.34 - 0.01 * T) * (salinity_psu - 35.0) + 0.016 * depth_m
+    return (1449.2 + 4.6 * T - 0.055 * T ** 2 + 0.00029 * T ** 3 + salinity_slope(T) * (salinity_psu - 35.0)
+            + 0.016 * depth_m)
+
+
+def salinity_slope(temperature_c):
+    """dc/dS of :func:`sound_speed_m_s`, (m/s)/ppt: 1.34 - 0.01 T (the formula is linear in S)."""
+    return 1.34 - 0.01 * temperature_c
 
 
 def salinity_for_sound_speed(c_m_s, temperature_c, depth_m=0.0):
-    """The salinity (ppt) at which :func:`sound_speed_m_s` gives ``c_m_s`` at this temperature and
-    depth (the formula is linear in S)."""
-    return 35.0 + (c_m_s - sound_speed_m_s(temperature_c, 35.0, depth_m)) / (1.34 - 0.01 * temperature_c)
+    """The salinity (ppt) at which :func:`sound_speed_m_s` gives ``c_m_s`` at this temperature and depth."""
+    return 35.0 + (c_m_s - sound_speed_m_s(temperature_c, 35.0, depth_m)) / salinity_slope(temperature_c)
 
 
 def temperature_for_sound_speed(c_m_s: float, salinity_psu: float, depth_m: float = 0.0) -> float | None:

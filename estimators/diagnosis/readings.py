@@ -3,7 +3,7 @@ sound speed and the salinity (or temperature) that gives it, beside the setting 
 
 from __future__ import annotations
 
-from ...models.sound_speed import salinity_for_sound_speed, temperature_for_sound_speed
+from ...models.sound_speed import salinity_for_sound_speed, salinity_slope, temperature_for_sound_speed
 
 
 def sound_speed_reading(c_instrument_m_s: float, relative_error: float, se: float, temperature_c: float | None,
@@ -20,7 +20,7 @@ def sound_speed_reading(c_instrument_m_s: float, relative_error: float, se: floa
             f"{c_instrument_m_s:.0f}")
     if temperature_c is not None and salinity_psu is not None:
         out["salinity_psu"] = float(salinity_for_sound_speed(c, temperature_c, depth_m))
-        out["salinity_se_psu"] = c_instrument_m_s * se / (1.34 - 0.01 * temperature_c)  # dc/dS of the formula
+        out["salinity_se_psu"] = c_instrument_m_s * se / salinity_slope(temperature_c)
         out["temperature_c"] = temperature_for_sound_speed(c, salinity_psu, depth_m)
         text += (f" (computed from {temperature_c:.1f} deg C and a salinity setting of {salinity_psu:g} ppt): "
                  f"a salinity of {out['salinity_psu']:.0f} +- {out['salinity_se_psu']:.0f} ppt at that temperature")
