@@ -7,8 +7,10 @@ the user's :class:`~adcpdyn.cases.attribution.Attribution` (people, licence, nam
 Nothing is guessed: what is not known is left out or said to be unknown.
 
 The geometry: pings with UTC times and GNSS positions are profiles along one vessel track,
-CF ``trajectoryProfile`` (``trajectory`` without a water profile) in the single-feature form
-(CF-1.8 §9.2: the trajectory's instance dimension omitted, its id a scalar); without dates or
+CF ``trajectoryProfile`` (``trajectory`` without a water profile) with one trajectory: its id on an
+instance dimension of length 1 (IOOS-1.2 checks that length; CF's single-feature form, a scalar id,
+fails it) and each ping indexed to it (``trajectory_index``, CF's indexed ragged array, H.4.4 and
+H.6.3, with every profile on the one trajectory); without dates or
 positions the file is no discrete-sampling geometry (CF needs time, latitude and longitude of
 every feature) and has no ``featureType``.
 """
@@ -32,6 +34,7 @@ METHOD_REFERENCE = ("Sun Z., Yao S., Gao N., Zhang K. (2024) An ADCP attitude dy
                     "corrections adcpdyn implements, static (ASC) and dynamic)")
 GCMD_OCEAN_CURRENTS = "EARTH SCIENCE > OCEANS > OCEAN CIRCULATION > OCEAN CURRENTS"
 VESSEL, ADCP = "vessel", "adcp"  # the IOOS platform and instrument container variables
+TRAJECTORY = "trajectory"  # the instance dimension of the one vessel track (length 1)
 NOT_DETERMINED = "not determined"
 # ISO 19115-1 coverage content types of the data variables that are not measurements
 QUALITY = ("error_velocity", "beams_used")
@@ -57,12 +60,16 @@ def describe(ds, case, provenance: dict, attribution: Attribution | None = None)
     attribution = attribution or Attribution()
     feature = feature_type(ds)
     sensor = _instrument_label(case)
-    vessel = xr.Variable((), case.name, {
-        "long_name": "the vessel carrying the ADCP (the IOOS platform)",
-        "comment": "value: the case's name" + ("; the trajectory's id" if feature else "")})
-    if feature:
-        vessel.attrs["cf_role"] = "trajectory_id"
-    ds = ds.assign({VESSEL: vessel})
+    attrs = {"long_name": "the vessel carrying the ADCP (the IOOS platform)",
+             "comment": "value: the case's name" + ("; the trajectory's id" if feature else "")}
+    if feature:  # one trajectory, on an instance dimension of its own (IOOS-1.2 asks for its length, 1)
+        attrs["cf_role"] = "trajectory_id"
+        ds = ds.assign({VESSEL: xr.Variable((TRAJECTORY,), np.array([case.name], dtype=object), attrs),
+                        "trajectory_index": xr.Variable("time", np.zeros(ds.sizes["time"], dtype=np.int32), {
+                            "instance_dimension": TRAJECTORY,
+                            "long_name": "the trajectory each ping (profile) belongs to: the one vessel track"})})
+    else:
+        ds = ds.assign({VESSEL: xr.Variable((), case.name, attrs)})
     if feature == "trajectoryProfile":
         ds = ds.assign_coords(profile=("time", np.arange(ds.sizes["time"], dtype=np.int32), {
             "cf_role": "profile_id", "long_name": "profile (ping) number in this file, from 0"}))
@@ -83,6 +90,9 @@ def _variable_attributes(ds, case, provenance: dict) -> None:
     internal_attitude = case.attitude.frame == "transducer"
     for name, var in ds.variables.items():
         if name in (VESSEL, ADCP):
+            continue
+        if name == "trajectory_index":
+            var.attrs["coverage_content_type"] = "referenceInformation"
             continue
         if name in ds.coords:
             var.attrs["coverage_content_type"] = "coordinate"

@@ -178,7 +178,8 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     applied = None if correction is None else correction.provenance
     calibrated = None if applied is None else applied.transducer_depth_calibrated_m
     entered = None if applied is None else applied.transducer_depth_entered_m  # None in files written before it was
-    data[ADCP] = _instrument_variable(case, calibrated, entered)  # recorded: the case's
+    written = ((applied.calibration_provenance or {}).get("written_utc") if applied is not None else None)
+    data[ADCP] = _instrument_variable(case, calibrated, entered, written)  # recorded: the case's
     if case.water is not None:
         coords["depth"] = ("depth", np.asarray(case.water.cell_depth_m, dtype=np.float64), {
             "standard_name": "depth", "long_name": "depth of the cell centre below the surface", "units": "m",
@@ -210,9 +211,10 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     return describe(ds, case, provenance, as_attribution(attribution))
 
 
-def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None) -> tuple:
+def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None, calibration_utc=None) -> tuple:
     """The ADCP as a container variable (IOOS-1.2): what it is and how deep its transducer sat (as calibrated
-    and used by a correction, and as entered; the case's when the entered depth is not recorded)."""
+    and used by a correction, and as entered; the case's when the entered depth is not recorded), and when the
+    calibration a correction applied was made (``calibration_utc``, its CALIB.json's ``written_utc``)."""
     ins = case.instrument
     entered = float(case.environment.transducer_depth_m if entered_depth_m is None else entered_depth_m)
     attrs = {"long_name": "the ADCP (a container variable: its value means nothing)",
@@ -224,6 +226,10 @@ def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None) -
     if calibrated_depth_m is not None:  # what the velocities were computed with, and what the instrument was told
         attrs["transducer_depth_comment"] += "; as calibrated from the slant ranges (used by the correction)"
         attrs["transducer_depth_entered_m"] = entered
+    if calibration_utc:
+        attrs["calibration_date"] = str(calibration_utc)
+        attrs["calibration_date_comment"] = ("when the adcpdyn calibration the correction applied (lever arms, installation "
+                                             "angles, compass) was computed: its CALIB.json's written_utc")
     return (), np.int32(0), attrs
 
 

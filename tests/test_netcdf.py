@@ -61,13 +61,16 @@ def cf_problems(path) -> list[str]:
         for key in ("title", "history", "source"):
             if not f.attrs.get(key):
                 out.append(f"global attribute {key} missing")
+        # a DSG's instance dimension (named by an index variable's instance_dimension) has no coordinate variable
+        instances = {v.attrs["instance_dimension"] for v in f.variables.values() if "instance_dimension" in v.attrs}
         for dim in f.dimensions:
-            if dim not in f.variables or f.variables[dim].dimensions != (dim,):
+            if dim not in instances and (dim not in f.variables or f.variables[dim].dimensions != (dim,)):
                 out.append(f"dimension {dim}: no coordinate variable")
         containers = {v.attrs[k] for v in f.variables.values() for k in ("platform", "instrument") if k in v.attrs}
         for name, var in f.variables.items():
             a = dict(var.attrs)
-            if name in containers or "cf_role" in a:  # metadata holders and feature ids: no physical quantity
+            if name in containers or "cf_role" in a or "instance_dimension" in a:  # metadata holders, feature ids and
+                # the index of the pings' feature: no physical quantity
                 if "long_name" not in a:
                     out.append(f"{name}: no long_name")
                 continue

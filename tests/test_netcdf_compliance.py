@@ -47,6 +47,10 @@ def test_a_real_export_passes_the_checker(tmp_path):
         _assert_passes(path)
         with xr.open_dataset(path, engine="h5netcdf") as ds:
             assert ds.attrs["featureType"] == "trajectoryProfile" and ds["vessel"].attrs["cf_role"] == "trajectory_id"
+            # one trajectory on an instance dimension of length 1 (the IOOS profile's check), every ping on it
+            assert ds["vessel"].dims == ("trajectory",) and ds.sizes["trajectory"] == 1
+            assert ds["trajectory_index"].attrs["instance_dimension"] == "trajectory"
+            assert ds["trajectory_index"].dims == ("time",) and not ds["trajectory_index"].values.any()
             assert Path(ds.attrs["source_file"]).is_absolute() and Path(ds.attrs["source_case_file"]).is_absolute()
 
 
@@ -126,3 +130,21 @@ def test_attribution_file_errors_and_misplaced_option(tmp_path, capsys):
     assert "--attribution: only with one case and --out OUT.nc" in err and err.count("\n") == 1
     with pytest.raises(ValueError, match=r"^attribution: only with out=OUT.nc"):
         api.correct(case_path, "asc", attribution=Attribution())
+
+
+def test_a_correction_records_when_its_calibration_was_made(tmp_path):
+    """The adcp variable's calibration_date is the applied CALIB.json's written_utc (ISO 8601, as IOOS asks);
+    a correction without a calibration claims none."""
+    import json
+
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    api.calibrate(case_path, n_starts=1).to_json(tmp_path / "C.json")
+    written = json.loads((tmp_path / "C.json").read_text())["provenance"]["written_utc"]
+    api.correct(case_path, "asc", calibration=tmp_path / "C.json", out=tmp_path / "cal.nc")
+    api.correct(case_path, "asc", out=tmp_path / "none.nc")
+    with xr.open_dataset(tmp_path / "cal.nc", engine="h5netcdf") as ds:
+        assert ds["adcp"].attrs["calibration_date"] == written
+        assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?Z", written)
+    with xr.open_dataset(tmp_path / "none.nc", engine="h5netcdf") as ds:
+        assert "calibration_date" not in ds["adcp"].attrs
