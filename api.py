@@ -198,6 +198,20 @@ def _keyed(sources: list) -> list:
     return [dataclasses.replace(s, case=s.case.replace(name=Path(s.path).stem)) if s.path else s for s in sources]
 
 
+def _calibrated_runs(sources: list, calibration: "CalibrationRecord | None", accept_other_instrument: bool) -> tuple:
+    """The cases of ``sources`` (already :func:`_keyed`) as the calibration's runs (checked to be its
+    instrument's, named as it keys its runs: :func:`~adcpdyn.estimators.calibration.identity.as_calibrated_run`),
+    and the notes on applying it."""
+    from .estimators.calibration.identity import as_calibrated_run
+
+    runs, notes = [], []
+    for s in sources:
+        run, applied = as_calibrated_run(s.case, s.path or s.case.name, calibration, accept_other_instrument)
+        runs.append(run)
+        notes += applied
+    return runs, notes
+
+
 def _calibration_provenance(record, given: str) -> dict:
     """What a correction records of the calibration it was given (a ``given`` object read into
     ``record``): the file it was read from with its SHA-256 then, or that it was in memory."""
@@ -624,7 +638,6 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         Too few pings, no attitude, an unknown effect or option (one line).
     """
     from .estimators.calibration.record import as_record
-    from .estimators.calibration.identity import as_calibrated_run
     from .estimators.diagnosis.diagnose import diagnose as _diagnose
 
     _choice("fmt", fmt, FIGURE_FORMATS)
@@ -639,14 +652,9 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     cal = as_record(calibration)
     prepared = [_prepared(_source(c, "cases")) for c in items]
     notes = [n for _, ns in prepared for n in ns]
-    sources = []
-    for s, _ in prepared:
-        run, applied = as_calibrated_run(s.case, s.path or s.case.name, cal, accept_other_instrument)
-        sources.append(dataclasses.replace(s, case=run))
-        notes += applied
-    sources = _keyed(sources)
+    run_cases, applied = _calibrated_runs(_keyed([s for s, _ in prepared]), cal, accept_other_instrument)
+    notes += applied
     config = _diagnosis_config(effects, attitude, navigation, given)
-    run_cases = [s.case for s in sources]
     result = _diagnose(run_cases if many else run_cases[0], config, calibration=cal, progress=progress)
     if notes:
         result.base["case_warnings"] = notes
@@ -694,7 +702,6 @@ def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=
         ``summary`` (top-1, per error the smallest size detected, the clean file's verdict).
     """
     from .estimators.calibration.record import as_record
-    from .estimators.calibration.identity import as_calibrated_run
     from .estimators.diagnosis.field_selftest import field_selftest as _field_selftest, write_field_selftest
 
     _choice("fmt", fmt, FIGURE_FORMATS)
@@ -713,11 +720,8 @@ def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=
         calibration = calibrate([s.case for s in sources] if len(sources) > 1 else sources[0].case, n_starts=8)
         note = "calibrated on itself (8 starts" + (", jointly" if len(sources) > 1 else "") + "): no --calibration given"
     cal = as_record(calibration)
-    runs = []
-    for s in sources:
-        run, applied = as_calibrated_run(s.case, s.path or s.case.name, cal, accept_other_instrument)
-        runs.append(run)
-        notes += applied
+    runs, applied = _calibrated_runs(sources, cal, accept_other_instrument)
+    notes += applied
     config = _diagnosis_config(effects, attitude, navigation)
     res = _field_selftest(runs if len(runs) > 1 else runs[0], cal, config, sizes=sizes, progress=progress)
     res["notes"] = notes + ([note] if note else [])
