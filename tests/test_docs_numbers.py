@@ -193,5 +193,5 @@ def test_status_page_figures_read_the_committed_runs():
                    f"10^5 pings in {big['calibration_s']:.1f} s, peak {big['peak_rss_mb'] / 1000:.2f} GB",
                    f"exponent {scale['exponents_largest_pair']['calibration_s']:.2f} between",
                    f"at {correction['deep_ocean']['rootfinder_over_asc']:.2f} of ASC's throughput",
-                   f"({coverage[0]:.2f}, {coverage[1]:.2f}: conservative"):
+                   f"({coverage[2]:.2f}, {coverage[3]:.2f}) with the compass deviation drawn from the calibration's prior"):
         assert figure in status, figure

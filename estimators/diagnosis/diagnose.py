@@ -627,21 +627,26 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
         effect=name, delta_ll=float(dll), delta_bic=float(dbic),
         # an effect without unknowns is not nested in the model it replaces: no likelihood-ratio test, the BIC compares
         p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else float("nan"),
-        at_bound=at_bounds(name, values), n_params=k, params=values,
+        at_bound=at_bounds(name, values, {n: float(model.scale[i]) for n, i in zip(mine, idx)}), n_params=k, params=values,
         params_se={n: float(e) for n, e in se.items()}, detection_limit=limits, gap_after=float(gap_after),
         shrink_fraction=float(shrink), velocity_error_m_s=_velocity_error(model, fit), success=fit.success,
         status=fit.status, iterations=fit.iterations, round=round_,
         heldout_z=heldout_improvement_z(model, cv, ref_model, ref_cv, noise))
 
 
-def at_bounds(effect: str, values: dict) -> list:
+def at_bounds(effect: str, values: dict, scales: dict | None = None) -> list:
     """The effect's unknowns (full names) whose estimate sits on a bound of the effect's range: the
-    data pushed them there, so their value and its standard error say nothing."""
+    data pushed them there, so their value and its standard error say nothing. "On" as the fit
+    holds an unknown by its bound (:meth:`GapModel.solve`'s ``free``): within 1e-5 of the range, or
+    of the unknown's scale (``scales``, full name -> scale) where that is larger; an interior-point
+    solver stops a hair inside a bound it presses on."""
     ranges = {q.name: (q.lower, q.upper) for q in get_effect(effect).parameters}
     out = []
     for name, v in values.items():
         lo, hi = ranges.get(name.rsplit(".", 1)[-1], (-np.inf, np.inf))
-        if min(abs(v - lo), abs(v - hi)) <= 1e-6 * max(1.0, abs(v)):
+        width = hi - lo if np.isfinite(hi - lo) else max(1.0, abs(v))
+        tol = 1e-5 * max(width, (scales or {}).get(name, 0.0))
+        if min(abs(v - lo), abs(v - hi)) <= tol:
             out.append(name)
     return out
 

@@ -202,7 +202,7 @@ def spectrum_hz(t: np.ndarray, z: np.ndarray, f_max_hz: float):
 def residual_figure(result):
     """The held-out residual figure as a matplotlib Figure (see :func:`figures`).
 
-    One row per channel in a fixed order (:func:`channel_sort_key`: BT beams 1-4, ranges, the
+    One row per channel with samples, in a fixed order (:func:`channel_sort_key`: BT beams 1-4, ranges, the
     reference north/east/down, heading/pitch/roll, the motion priors last), every run of a
     joint diagnosis in the same row (marker and line style per run). Left: held-out residual
     over its noise level, r/sigma, against time. Right: its Lomb-Scargle periodogram against
@@ -229,8 +229,10 @@ def residual_figure(result):
     modes_hz = sorted({float(f"{w / (2 * np.pi):.3g}") for r in runs if getattr(r, "fit", None) is not None
                        for w, _ in r.fit.params.modes if 0 < w / (2 * np.pi) <= f_axis_max})
     by_local: dict = {}
+    slices = base_model.channel_slices()
     for ch, _ in base_model.channels:
-        by_local.setdefault(ch.rpartition("/")[2], []).append(ch)
+        if np.any(base_model.mask[slices[ch]] > 0):  # a channel without a sample (a reference without its down
+            by_local.setdefault(ch.rpartition("/")[2], []).append(ch)  # component) gets no empty row
     rows = sorted(by_local, key=channel_sort_key)
     markers, styles = "ox^+sd", ("-", "--", ":", "-.")
     fig, axes = plt.subplots(len(rows), 2, figsize=(12, 1.45 * len(rows) + 1.6), squeeze=False, sharex="col",
