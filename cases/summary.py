@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import lombscargle
 
+from ..models.janus import beam_to_instrument
 from .case import Case
 
 
@@ -24,6 +25,20 @@ def dominant_period_s(t, x, f_min_hz=0.02, f_max_hz=3.0) -> float:
     f = np.linspace(f_min_hz, f_max_hz, 3000)
     power = lombscargle(t, x, 2 * np.pi * f)
     return float(1.0 / f[np.argmax(power)])
+
+
+def error_velocity_levels(radial_m_s, beam_dirs) -> tuple[float, float, int]:
+    """(RMS error velocity, per-beam noise it implies, pings used) of four-beam pings: the error
+    velocity (RDI's, :func:`~adcpdyn.models.janus.beam_to_instrument`) is what no rigid velocity
+    explains, so for independent beam noise sigma its RMS is sigma |e|, e the error row; NaN where
+    no ping has four beams."""
+    radial = np.asarray(radial_m_s, dtype=float)
+    _, e = beam_to_instrument(beam_dirs)
+    four = np.all(np.isfinite(radial), axis=1)
+    if not four.any():
+        return float("nan"), float("nan"), 0
+    rms = float(np.sqrt(np.mean((radial[four] @ e) ** 2)))
+    return rms, rms / float(np.linalg.norm(e)), int(four.sum())
 
 
 def _intervals(t):
@@ -50,6 +65,9 @@ def summarise(case: Case) -> str:
         f"pings        {p.n} over {dur:.1f} s, {_intervals(p.time_s)}; lost beams {int(lost.sum())} of {lost.size}"
         + ("; slant ranges" if p.bt_range_m is not None else ""),
     ]
+    rms, beam, used = error_velocity_levels(p.bt_radial_m_s, ins.beam_directions())
+    if used:
+        lines.append(f"  error vel  RMS {rms:.4f} m/s over {used} four-beam pings: about {beam:.4f} m/s of noise per beam")
     ypr = a.ypr()
     amp = lambda x: 0.5 * (np.nanpercentile(x, 99) - np.nanpercentile(x, 1))
     missing = int((~a.complete()).sum())
