@@ -203,13 +203,18 @@ class CalibrationRecord:
         """
         from ...cases.hashing import sha256_of
 
-        return replace(cls.from_dict(read_calibration(path)), source_sha256=sha256_of(path))
+        return cls.typed(read_calibration(path), sha256_of(path))
 
     @classmethod
     def from_dict(cls, d) -> "CalibrationRecord":
         """Type a parsed CALIB.json (validated first unless it already is a ``Calibration``:
         :func:`~adcpdyn.estimators.calibration.file.calibration_from_dict`)."""
-        c = calibration_from_dict(d)
+        return cls.typed(calibration_from_dict(d))
+
+    @classmethod
+    def typed(cls, c: Calibration, source_sha256: str | None = None) -> "CalibrationRecord":
+        """The record of a validated calibration (``read_calibration`` or ``calibration_from_dict``), with
+        the SHA-256 of the file it was read from."""
         frame = c.get("attitude_frame") or "vessel"
         head_key = "radius_vectors_head_m" if frame == "transducer" and "radius_vectors_head_m" in c else "radius_vectors_m"
         head_se = "radius_vectors_head_se_m" if head_key == "radius_vectors_head_m" else "radius_vectors_se_m"
@@ -263,7 +268,7 @@ class CalibrationRecord:
             provenance=dict(c.get("provenance") or {}) if isinstance(c.get("provenance"), dict) else {},
             source=c.source, data=c,
             instrument=InstrumentIdentity.from_dict(c["instrument"]) if c.get("instrument") else None,
-            site=Site.from_dict(c["site"]) if c.get("site") else None,
+            site=Site.from_dict(c["site"]) if c.get("site") else None, source_sha256=source_sha256,
         )
 
     # ------------------------------------------------------------------ what the readers use
@@ -448,13 +453,16 @@ def as_record(calibration) -> CalibrationRecord | None:
         One line naming the file and the key, for an invalid file or dict; or naming
         ``calibration`` for an object of another type.
     """
+    from ...cases.hashing import sha256_of
+
     if calibration is None or isinstance(calibration, CalibrationRecord):
         return calibration
-    if isinstance(calibration, (str, os.PathLike)):
-        return CalibrationRecord.from_json(calibration)
-    if not isinstance(calibration, dict) and callable(getattr(calibration, "to_dict", None)):
+    path = isinstance(calibration, (str, os.PathLike))
+    if not path and not isinstance(calibration, dict) and callable(getattr(calibration, "to_dict", None)):
         calibration = calibration.to_dict()
-    if not isinstance(calibration, dict):
+    if not path and not isinstance(calibration, dict):
         raise ValueError(f"calibration: expected a CALIB.json path, a dict, a CalibrationResult or a CalibrationRecord, "
                          f"got {type(calibration).__name__}")
-    return CalibrationRecord.from_dict(calibration)
+    # read and validated in one place, then typed: the file's room is entered once
+    validated = read_calibration(calibration) if path else calibration_from_dict(calibration)
+    return CalibrationRecord.typed(validated, sha256_of(calibration) if path else None)
