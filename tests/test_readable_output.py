@@ -238,6 +238,13 @@ def test_diagnose_prints_within_100_characters_with_hz_and_units(diagnosis):
     assert "rad/s" not in text.split("Which effect")[0] and " Hz" in text
     assert "bt 0.00" in text and re.search(r"bt \d\.\d+ m/s", text) and re.search(r"heading \d\.\d+ deg", table(result))
     assert "delay +0.00" in text and " s ± " in text  # the latency in seconds, said so
+    # the bottom track's own floor beside its fitted level, as its error velocity gives it
+    from adcpdyn.cases.summary import error_velocity_levels
+
+    case = result.fits["base"][0].base.runs[0].case
+    floor = error_velocity_levels(case.pings.bt_radial_m_s, case.instrument.beam_directions())[1]
+    assert f"the bottom track's error velocity alone implies {floor:.3g} m/s per beam" in " ".join(text.split())
+    assert f"error velocity alone implies {floor:.3g} m/s per beam" in table(result)
 
 
 def test_panel_labels_go_past_z_in_letters():

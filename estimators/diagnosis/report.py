@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ...cases.atomic import atomic_path
+from ...cases.summary import error_velocity_levels
 from ...text import noise_level_text
 from ..calibration.result import jsonable
 from .model import noise_key
@@ -48,11 +49,27 @@ def table(result, n_where: int = 6) -> str:
                      f"{params} | {s['status']} |")
     if r.base.get("skipped_effects"):
         lines += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in r.base["skipped_effects"].items())]
-    lines += ["", "Noise levels (one standard deviation): " + ", ".join(noise_level_text(g, v) for g, v in r.noise.items())]
+    lines += ["", noise_text(r)]
     return "\n".join(lines) + "\n"
 
 
 UNIT_SUFFIXES = (("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_s", "s"), ("_m", "m"))  # from the name; _rad in deg
+
+
+def noise_text(result) -> str:
+    """The noise levels with their units, and beside the bottom track's the beam noise its own error
+    velocity implies (``adcpdyn info``): a bt level well above it is misfit the base leaves, not noise."""
+    text = "Noise levels (one standard deviation): " + ", ".join(noise_level_text(g, v) for g, v in result.noise.items())
+    fits = getattr(result, "fits", None) or {}
+    runs = fits["base"][0].base.runs if "base" in fits else []
+    floors = []
+    for run in runs:
+        _, beam, used = error_velocity_levels(run.case.pings.bt_radial_m_s, run.case.instrument.beam_directions())
+        if used:
+            floors.append(f"{beam:.3g} m/s" + (f" ({run.case.name})" if len(runs) > 1 else ""))
+    if floors:
+        text += f"; the bottom track's error velocity alone implies {', '.join(floors)} per beam"
+    return text
 
 
 def parameter_text(name: str, value: float, se: float | None, at_bound: bool = False) -> str:
@@ -129,7 +146,7 @@ def terminal_text(result, n_where: int = 6, width: int | None = None) -> str:
                                    subsequent_indent="      ")
     if r.base.get("skipped_effects"):
         lines += para("Not tried: " + "; ".join(f"{k} ({v})" for k, v in r.base["skipped_effects"].items()))
-    lines += para("Noise levels (one standard deviation): " + ", ".join(noise_level_text(g, v) for g, v in r.noise.items()))
+    lines += para(noise_text(r))
     return "\n".join(lines) + "\n"
 
 
