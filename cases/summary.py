@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import lombscargle
 
-from ..models.janus import beam_to_instrument
+from ..models.janus import error_velocity
 from .case import Case
 
 
@@ -29,16 +29,15 @@ def dominant_period_s(t, x, f_min_hz=0.02, f_max_hz=3.0) -> float:
 
 def error_velocity_levels(radial_m_s, beam_dirs) -> tuple[float, float, int]:
     """(RMS error velocity, per-beam noise it implies, pings used) of four-beam pings: the error
-    velocity (RDI's, :func:`~adcpdyn.models.janus.beam_to_instrument`) is what no rigid velocity
+    velocity (RDI's, :func:`~adcpdyn.models.janus.error_velocity`) is what no rigid velocity
     explains, so for independent beam noise sigma its RMS is sigma |e|, e the error row; NaN where
     no ping has four beams."""
-    radial = np.asarray(radial_m_s, dtype=float)
-    _, e = beam_to_instrument(beam_dirs)
-    four = np.all(np.isfinite(radial), axis=1)
-    if not four.any():
+    err, norm = error_velocity(radial_m_s, beam_dirs)
+    err = err[np.isfinite(err)]
+    if not err.size:
         return float("nan"), float("nan"), 0
-    rms = float(np.sqrt(np.mean((radial[four] @ e) ** 2)))
-    return rms, rms / float(np.linalg.norm(e)), int(four.sum())
+    rms = float(np.sqrt(np.mean(err**2)))
+    return rms, rms / norm, int(err.size)
 
 
 def _intervals(t):

@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..cases.case import Case
-from ..models.janus import beam_to_instrument
+from ..models.janus import error_velocity
 from ..models.kinematics import centre_of_rotation_depth
 from ..models.measurement import bottom_track_function
 from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE, AttitudeParams, SampledAttitude,
@@ -149,13 +149,12 @@ def window_basis_sparse(windows, knots) -> sp.csr_matrix:
 
 def bt_noise_from_error_velocity(case: Case) -> float:
     """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
-    _, e = beam_to_instrument(case.instrument.beam_directions())
-    err = case.pings.bt_radial_m_s @ e
+    err, norm = error_velocity(case.pings.bt_radial_m_s, case.instrument.beam_directions())
     err = err[np.isfinite(err)]
     if err.size < 5:
         return 0.01
     mad = 1.4826 * np.median(np.abs(err - np.median(err)))
-    return float(max(mad / np.linalg.norm(e), 1e-4))
+    return float(max(mad / norm, 1e-4))
 
 
 def reference_noise_from_differences(time_s, velocity_m_s) -> float:

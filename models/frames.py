@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .janus import beam_to_instrument, three_beam_solution
+from .janus import error_velocity, three_beam_solution
 from .rotations import euler_matrices, euler_matrix
 
 
@@ -28,6 +28,5 @@ def sensed_rotation(ypr_rad: np.ndarray, frame: str, installation_ypr_rad=(0.0, 
 def beams_to_earth(radial: np.ndarray, beam_dirs_t: np.ndarray, R: np.ndarray):
     """Radial velocities (N, 4) -> Earth velocities (N, 3), error velocity (N,), beams used (N,)."""
     v_t, n_good = three_beam_solution(beam_dirs_t, radial)
-    _, e = beam_to_instrument(beam_dirs_t)
-    err = np.where(n_good == 4, np.nan_to_num(radial) @ e, np.nan)
+    err, _ = error_velocity(radial, beam_dirs_t)
     return np.einsum("nij,nj->ni", R, v_t), err, n_good

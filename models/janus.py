@@ -81,6 +81,16 @@ def beam_to_instrument(beam_dirs):
     return M, n / (np.sqrt(2.0) * horizontal)
 
 
+def error_velocity(radial, beam_dirs) -> tuple[np.ndarray, float]:
+    """RDI's error velocity of each ping (N,) from its radials (N, 4) (:func:`beam_to_instrument`'s
+    error row e; NaN unless all four beams are valid), and |e|: independent beam noise sigma gives
+    an error velocity of SD sigma |e|."""
+    radial = np.asarray(radial, dtype=float)
+    _, e = beam_to_instrument(beam_dirs)
+    four = np.all(np.isfinite(radial), axis=1)
+    return np.where(four, np.nan_to_num(radial) @ e, np.nan), float(np.linalg.norm(e))
+
+
 def three_beam_solution(beam_dirs, radial):
     """Velocity from three beams when one is lost (NaN), per row; NaN if two or more are lost.
 
