@@ -18,7 +18,7 @@ Imports run one way: file <- record <- result.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -453,16 +453,13 @@ def as_record(calibration) -> CalibrationRecord | None:
         One line naming the file and the key, for an invalid file or dict; or naming
         ``calibration`` for an object of another type.
     """
-    from ...cases.hashing import sha256_of
-
     if calibration is None or isinstance(calibration, CalibrationRecord):
         return calibration
-    path = isinstance(calibration, (str, os.PathLike))
-    if not path and not isinstance(calibration, dict) and callable(getattr(calibration, "to_dict", None)):
+    if isinstance(calibration, (str, os.PathLike)):
+        return CalibrationRecord.from_json(calibration)
+    if not isinstance(calibration, dict) and callable(getattr(calibration, "to_dict", None)):
         calibration = calibration.to_dict()
-    if not path and not isinstance(calibration, dict):
+    if not isinstance(calibration, dict):
         raise ValueError(f"calibration: expected a CALIB.json path, a dict, a CalibrationResult or a CalibrationRecord, "
                          f"got {type(calibration).__name__}")
-    # read and validated in one place, then typed: the file's room is entered once
-    validated = read_calibration(calibration) if path else calibration_from_dict(calibration)
-    return CalibrationRecord.typed(validated, sha256_of(calibration) if path else None)
+    return CalibrationRecord.from_dict(calibration)
