@@ -48,7 +48,7 @@ from ..measurement_model import (NAVIGATION_CHOICES, EffectTerm, ModelSpec, RunS
                                  course_offset_rad, heading_centre, knot_times, ping_knots)
 from . import where as where_mod
 from .readings import sound_speed_reading
-from .model import PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
+from .model import BOUND_TOL, PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
 from ..statistics.normal_equations import (as_sparse, group_levels, inverse_columns, leave_out_predictions,
                                           marginal_covariance, redundancy)
 
@@ -637,7 +637,7 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
 def at_bounds(effect: str, values: dict, scales: dict | None = None) -> list:
     """The effect's unknowns (full names) whose estimate sits on a bound of the effect's range: the
     data pushed them there, so their value and its standard error say nothing. "On" as the fit
-    holds an unknown by its bound (:meth:`GapModel.solve`'s ``free``): within 1e-5 of the range, or
+    holds an unknown by its bound (:meth:`GapModel.solve`'s ``free``): within ``BOUND_TOL`` of the range, or
     of the unknown's scale (``scales``, full name -> scale) where that is larger; an interior-point
     solver stops a hair inside a bound it presses on."""
     ranges = {q.name: (q.lower, q.upper) for q in get_effect(effect).parameters}
@@ -645,7 +645,7 @@ def at_bounds(effect: str, values: dict, scales: dict | None = None) -> list:
     for name, v in values.items():
         lo, hi = ranges.get(name.rsplit(".", 1)[-1], (-np.inf, np.inf))
         width = hi - lo if np.isfinite(hi - lo) else max(1.0, abs(v))
-        tol = 1e-5 * max(width, (scales or {}).get(name, 0.0))
+        tol = BOUND_TOL * max(width, (scales or {}).get(name, 0.0))
         if min(abs(v - lo), abs(v - hi)) <= tol:
             out.append(name)
     return out

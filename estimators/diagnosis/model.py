@@ -32,6 +32,7 @@ from ..statistics.normal_equations import as_sparse, log_det_normal
 # size: a diagnosis refits tens of NLPs, so even a 261-ping file gains (winriver01, random-walk base:
 # 34.8 s interpreted, 24.7 s compiling into an empty cache, 20-21 s with it warm; same numbers to ~1e-8).
 GAP_COMPILE_MIN_PINGS = 0
+BOUND_TOL = 1e-5  # an unknown this close to a bound, relative to its range (or its scale where larger), is held by it
 
 
 def group_of(channel: str) -> str:
@@ -233,7 +234,7 @@ class GapModel:
         e, raw, J = self.residual_fun(ms.x, w)
         e, raw, J = np.asarray(e), np.asarray(raw), sparse_of(J)
         z = np.asarray(ms.x).ravel()
-        tol = 1e-5 * np.maximum(np.abs(ubz - lbz), 1.0)
+        tol = BOUND_TOL * np.maximum(np.abs(ubz - lbz), 1.0)
         free = (z - lbz > tol) & (ubz - z > tol)
         return Fit(effects=[t.effect.name for t in self.effects], x=ms.x * self.scale, names=list(self.names),
                    raw=raw.ravel() * self.mask, sigma=dict(sigma), objective=float(ms.objective), success=bool(ms.success),
