@@ -52,6 +52,15 @@ def bottom_track_function(attitude_fun: ca.Function, timing: str, tangential: st
                        list(ARGUMENTS), ["radial", "range"])
 
 
+def bottom_track_expanded(attitude_fun: ca.Function, timing: str, tangential: str, arguments: list, receive_attitude):
+    """:func:`bottom_track_function`'s radial (4,) and its receive times (4,) as expressions of
+    ``arguments`` (in :data:`ARGUMENTS`' order), with the attitude at beam i's receive time t
+    taken from ``receive_attitude(i, t)`` (e.g. an expansion about a time where it is already
+    evaluated, :func:`~adcpdyn.models.motion.attitude_expansion`) instead of evaluated there."""
+    echo = _echo(attitude_fun, timing, tangential, *arguments, receive_attitude=receive_attitude)
+    return echo["radial"], echo["receive_time"]
+
+
 def echo_function(attitude_fun: ca.Function, timing: str, tangential: str = "consistent") -> ca.Function:
     """The model of :func:`bottom_track_function` with each beam's echo received at a given time:
     ``echo(t_T, t_R (4,), depth, g_depth, c, v_a, p, r, ypr_st, beam_dirs_t) -> (radial (4,),
@@ -113,17 +122,23 @@ def _symbols(attitude_fun: ca.Function):
             ca.SX.sym("beam_dirs_t", 4, 3))
 
 
-def _echo(attitude_fun, timing, tangential, t_T, depth, g_depth, c, v_a, p, r, ypr_st, b_t, receive_at=None) -> dict:
+def _echo(attitude_fun, timing, tangential, t_T, depth, g_depth, c, v_a, p, r, ypr_st, b_t, receive_at=None,
+          receive_attitude=None) -> dict:
     """The model's expressions for one ping (see :func:`bottom_track_function`), each beam's echo
-    received at the model's own time or, given ``receive_at`` (4,), at that time."""
+    received at the model's own time or, given ``receive_at`` (4,), at that time.
+
+    ``receive_attitude(i, t)``, if given, is the attitude (``attitude_fun``'s outputs) at beam i's
+    receive time t, in place of ``attitude_fun(t, p)``: an expansion about a nearby time where it
+    is already known (:func:`~adcpdyn.models.motion.attitude_expansion`)."""
+    attitude_at = receive_attitude or (lambda i, t: attitude_fun(t, p))
     if timing not in TIMINGS:
         raise ValueError(f"timing: expected one of {list(TIMINGS)}, got {timing!r}")
     if tangential not in TANGENTIALS:
         raise ValueError(f"tangential: expected one of {list(TANGENTIALS)}, got {tangential!r}")
     Lst = euler_matrix(ypr_st[0], ypr_st[1], ypr_st[2])
 
-    def state(t):
-        _, Lam, _, Omega, omega = attitude_fun(t, p)
+    def state(t, attitude=None):
+        _, Lam, _, Omega, omega = attitude or attitude_fun(t, p)
         d = beam_directions_earth(Lam, Lst, b_t)  # Eqs. 26-29
         if tangential == "consistent":
             v = transducer_velocity_earth(Lam, omega, r, v_a)  # Eq. 24
@@ -133,7 +148,7 @@ def _echo(attitude_fun, timing, tangential, t_T, depth, g_depth, c, v_a, p, r, y
         return d, v, z, Lam
 
     def received(i, t):
-        d_R, v_R, _, _ = state(t)
+        d_R, v_R, _, _ = state(t, attitude_at(i, t))
         return ca.dot(v_R[i, :], d_R[i, :])
 
     d_T, v_T, z_T, Lam_T = state(t_T)
@@ -152,7 +167,7 @@ def _echo(attitude_fun, timing, tangential, t_T, depth, g_depth, c, v_a, p, r, y
             if timing == "exact":  # positions relative to G(t_T)
                 spot = ca.mtimes(Lam_T, r[i, :].T) + l_out[i] * d_T[i, :].T
                 for _ in range(EXACT_TIME_ITERATIONS):
-                    Lam_R = attitude_fun(t_R, p)[1]
+                    Lam_R = attitude_at(i, t_R)[1]
                     back = ca.norm_2(spot - (v_a * (t_R - t_T) + ca.mtimes(Lam_R, r[i, :].T)))
                     t_R = t_T + (l_out[i] + back) / c
                 ranges.append(c * (t_R - t_T) / 2)

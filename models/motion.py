@@ -400,6 +400,38 @@ class SampledAttitude:
         return np.interp(times, self.time_s, np.unwrap(self.ypr_rad[:, 0]))
 
 
+def attitude_expansion(attitude_fun: ca.Function, t0, p, order: int = 2):
+    """``attitude_fun``'s outputs about ``t0`` as their Taylor polynomials of ``order`` in t - t0: a
+    callable ``t -> [ypr, Lambda, dLambda_dt, Omega, omega]`` (SX expressions).
+
+    The coefficients are the outputs' time derivatives at t0 by algorithmic differentiation of the
+    same Function, so they reuse its sines, cosines and exponentials at t0: the attitude a moment
+    after a time where it is already evaluated, without evaluating it again. The remainder is
+    below max|d^(order+1)/dt^(order+1)| |t - t0|^(order+1) / (order+1)!.
+    """
+    h = ca.SX.sym("h")
+    coefficients = []
+    for out in attitude_fun(t0 + h, p):
+        terms, d = [], out
+        for k in range(order + 1):
+            terms.append(ca.substitute(d, h, ca.SX(0)) / float(np.prod(np.arange(1, k + 1))))
+            if k < order:
+                d = ca.reshape(ca.jacobian(ca.vec(d), h), d.shape)
+        coefficients.append(terms)
+
+    def at(t):
+        dt = t - t0
+        values = []
+        for terms in coefficients:
+            v = terms[-1]
+            for c in reversed(terms[:-1]):  # Horner
+                v = c + dt * v
+            values.append(v)
+        return values
+
+    return at
+
+
 HEADING_CORRECTION_SIZE = 3  # misalignment, deviation B (sin), deviation C (cos)
 
 

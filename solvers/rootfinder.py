@@ -25,7 +25,8 @@ Newton step on the model with the receive times as unknowns too: g(x, t_R) = rad
 eliminating the receive times leaves (g_x + g_t T_x) dx = -(g + g_t (T(x0) - t0)) (g_t
 diagonal: beam i's echo depends on its own receive time), every derivative generated
 symbolically from the model's Functions; the exact residual (the attitude at the new
-receive times T(x1)) is evaluated at the result. The step leaves ~1e-13 m/s in shallow
+receive times T(x1), by its Taylor polynomial about t0: ``EXPANSION_ORDER``) is evaluated at
+the result. The step leaves ~1e-13 m/s in shallow
 water; its error grows as the square of t0 - T(x), the closed form's receive times being
 ~2e-5 s off in 300 m of water, where it leaves up to ~3e-10 m/s: inside the tolerance
 ``NEWTON_RESIDUAL_TOL`` (1e-9 m/s, six orders below a bottom track's noise), so one step serves
@@ -36,9 +37,9 @@ with a convergence test); pings it leaves above get NaN.
 
 Each per-ping Function is evaluated over all pings by :class:`~adcpdyn.solvers.ping_map.PingFunction`;
 the beams enter already turned into the sensor frame (shared by every ping), so no ping
-evaluates the installation rotation. Per ping the exact solve evaluates the attitude nine
-times (transmit, the closed form's four receive times, the result's four): its sines,
-cosines and exponentials are most of its cost.
+evaluates the installation rotation. Per ping the exact solve evaluates the attitude five
+times (transmit, the closed form's four receive times; at the result's four it is expanded
+about the closed form's): its sines, cosines and exponentials are most of its cost.
 """
 
 from __future__ import annotations
@@ -49,13 +50,17 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..models.measurement import ARGUMENTS, bottom_track_function, doppler_system_function, echo_function
-from ..models.motion import LOCAL_ATTITUDE_SIZE, AttitudeLayout, attitude_function, local_attitude_function
+from ..models.measurement import (ARGUMENTS, bottom_track_expanded, bottom_track_function, doppler_system_function,
+                                  echo_function)
+from ..models.motion import (LOCAL_ATTITUDE_SIZE, AttitudeLayout, attitude_expansion, attitude_function,
+                             local_attitude_function)
 from ..models.rotations import euler_matrix
 from .ping_map import MapOptions, PingFunction
 
 NEWTON_RESIDUAL_TOL = 1e-9  # m/s; pings above it take another Newton step while steps are left, then casadi.rootfinder
 N_PING_INPUTS = 6  # t_T, bottom depth, four measured radial velocities
+EXPANSION_ORDER = 2  # the attitude at the result's receive times: Taylor polynomial about the closed form's
+EXPANSION_MAX_STEP_S = 2e-4  # beyond this from the closed form's receive times, the residual is evaluated without it
 
 
 @dataclass(frozen=True)
@@ -190,13 +195,26 @@ def _newton_step(model: _Model, x0, t0, q, s):
 
 @functools.lru_cache(maxsize=16)
 def _exact(model: _Model) -> PingFunction:
-    """``(q, s) -> (x (4,), residual (4,))``: the closed form, one Newton step from it with its
-    receive times (module docstring), the exact residual at the result."""
+    """``(q, s) -> (x (4,), residual (4,), step (1,))``: the closed form, one Newton step from it with
+    its receive times (module docstring), the residual at the result, and the largest distance
+    (s) of the result's receive times from the closed form's.
+
+    The residual takes the attitude at the result's receive times as its second-order Taylor
+    polynomial about the closed form's (:func:`~adcpdyn.models.motion.attitude_expansion`), where
+    the attitude is already evaluated: a remainder below |d^3 Lambda/dt^3| step^3 / 6, 1e-12 at
+    ``EXPANSION_MAX_STEP_S`` for motions of 1 rad/s^3 (the step is ~2e-5 s in 300 m of water);
+    pings farther get the residual evaluated at their receive times (:func:`solve_bottom_track`).
+    """
     q, s = model.symbols()
     _, _, t0, x0 = _closed_form_expr(model, q, s)
     x1 = _newton_step(model, x0, t0, q, s)
-    return PingFunction(ca.Function("bottom_track_exact", [q, s], ca.cse([x1, _residual_expr(model, x1, q, s)]), ["q", "s"],
-                                    ["x", "g"]))
+    a = model.arguments(q, s)
+    about = [attitude_expansion(model.attitude_function(), t0[i], a["p"], EXPANSION_ORDER) for i in range(4)]
+    radial, receive_time = bottom_track_expanded(model.attitude_function(), model.timing, model.tangential,
+                                                 _call(a, v_a=x1[:3]), lambda i, t: about[i](t))
+    g = radial + x1[3] * model.error_direction() - a["radial"]
+    step = ca.mmax(ca.fabs(receive_time - t0))
+    return PingFunction(ca.Function("bottom_track_exact", [q, s], ca.cse([x1, g, step]), ["q", "s"], ["x", "g", "step"]))
 
 
 @functools.lru_cache(maxsize=16)
@@ -276,8 +294,11 @@ def solve_bottom_track(layout: AttitudeLayout | None, attitude_p, lever_arms_m, 
         x = _closed_form(model)(q, s, options=options)[2]
         res = norm(_residual_mapped(model)(x, q, s, options=options)[0])
     else:
-        x, g = _exact(model)(q, s, options=options)
+        x, g, step = _exact(model)(q, s, options=options)
         res = norm(g)
+        far = np.flatnonzero(~(step[:, 0] <= EXPANSION_MAX_STEP_S))
+        if far.size:
+            res[far] = norm(_residual_mapped(model)(x[far], q[far], s, options=options)[0])
     above = lambda r, tol: ~(r <= tol)  # NaN counts as above
     more = np.flatnonzero(above(res, NEWTON_RESIDUAL_TOL)) if options.steps > 1 else np.zeros(0, dtype=int)
     todo = more

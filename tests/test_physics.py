@@ -130,6 +130,27 @@ def test_attitude_rates_by_the_turned_mode_pair_equal_differentiating_the_angles
         assert float(ca.norm_inf(f(RNG.uniform(-5, 15), params))) < 1e-13
 
 
+def test_attitude_expansion_converges_at_its_order_and_is_exact_at_its_centre():
+    """attitude_expansion of order 2 against the attitude Function itself at t0 + h: every output
+    (angles, Lambda, its rate, Omega, omega) equal at h = 0, the error shrinking as h^3 (a tenth
+    of h: a thousandth of the error) down to 2e-4 s, for three modes with a yaw trend."""
+    from adcpdyn.models.motion import AttitudeLayout, attitude_expansion
+
+    layout = AttitudeLayout(n_modes=3, yaw_trend_order=2, t_ref_s=5.0)
+    fun = attitude_function(layout)
+    t0, h, p = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("p", layout.size)
+    about = attitude_expansion(fun, t0, p, order=2)
+    err = ca.Function("err", [t0, h, p], [ca.vertcat(*[ca.vec(a - b) for a, b in zip(about(t0 + h), fun(t0 + h, p))])])
+    for _ in range(5):
+        params = RNG.uniform(-0.5, 0.5, layout.size)
+        params[layout.slices()["modes"]] = np.ravel([[RNG.uniform(0.3, 1.5), RNG.uniform(0, 0.3)] for _ in range(3)])
+        t = RNG.uniform(0, 10)
+        e = [float(ca.norm_inf(err(t, step, params))) for step in (0.0, 1e-1, 1e-2, 2e-4)]
+        assert e[0] < 1e-15
+        assert 300 < e[1] / e[2] < 3000  # third order
+        assert e[3] < 2 * e[2] * (2e-4 / 1e-2) ** 3 + 1e-15
+
+
 def test_janus_least_squares_is_eq5_and_error_velocity_vanishes_for_rigid_motion():
     a = np.deg2rad(30.0)
     B = np.asarray(janus.janus_beam_directions(a))

@@ -51,6 +51,8 @@ def test_exact_solve_equals_scipy_root_ping_by_ping(scenario, timing):
         assert np.max(np.abs(residual(ref.x))) < 1e-11  # converged to rounding (its own flag can say "no progress")
         assert np.max(np.abs(out["V"][k] - ref.x[:3])) < 1e-9
         assert abs(out["e"][k] - ref.x[3]) < 1e-9
+        # the residual reported (the attitude expanded about the closed form's receive times) is the model's
+        assert abs(np.max(np.abs(residual(np.r_[out["V"][k], out["e"][k]]))) - out["residual"][k]) < 1e-11
     assert np.max(np.abs(out["e"])) > 1e-3  # the noise: not the trivial root
 
 
