@@ -123,3 +123,19 @@ def test_a_ping_without_a_root_is_nan_and_counted():
     keep = np.arange(20) != 5
     assert np.array_equal(out["V"][keep], good["V"][keep])
     assert good["unconverged_pings"] == good["fallback_pings"] == 0 and np.max(good["residual"]) < 1e-9
+
+
+def test_pings_beyond_the_expansion_get_the_residual_evaluated_at_their_receive_times(monkeypatch):
+    """With the expansion's reach set to zero every ping's residual is evaluated at the result's own
+    receive times: the same residuals (to 1e-12 m/s in 300 m of water) and the same solution."""
+    from adcpdyn.solvers import rootfinder
+
+    case = simulate(get_scenario("deep_ocean"), seed=2)
+    args = _ping_model(case, true_attitude(case), case.truth.radius_vectors_m + 0.01, case.truth.installation_ypr_rad,
+                       np.arange(40))
+    near = solve_bottom_track(**args)
+    monkeypatch.setattr(rootfinder, "EXPANSION_MAX_STEP_S", 0.0)
+    far = solve_bottom_track(**args)
+    assert np.max(near["residual"]) > 1e-11  # deep water: the first Newton step leaves something to compare
+    assert np.max(np.abs(far["residual"] - near["residual"])) < 1e-12
+    assert np.array_equal(far["V"], near["V"])
