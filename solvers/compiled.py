@@ -21,6 +21,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
+import threading
 from pathlib import Path
 
 import casadi as ca
@@ -34,6 +35,9 @@ NATIVE_FLAGS = ("-O2", "-march=native", "-ffp-contract=off", "-fPIC", "-shared")
 SUFFIX = ".so"
 
 last_failure: str | None = None  # why the last compilation fell back to the interpreted Function
+MAX_LOADED = 64  # loaded libraries kept for reuse (by the Function's serialized form)
+_loaded: dict = {}  # (serialized hash, reverse, cache folder, compiler) -> (library path, the loaded Function)
+_loaded_lock = threading.Lock()
 
 
 def cache_dir() -> Path:
@@ -101,12 +105,35 @@ def library_path(fun: ca.Function, reverse: bool = False) -> tuple[Path, str]:
 
 def compiled(fun: ca.Function, reverse: bool = False) -> ca.Function:
     """``fun`` as a compiled library from the cache (built there if missing), with its reverse
-    derivative when ``reverse``; ``fun`` itself when it cannot be compiled (:data:`last_failure`)."""
-    global last_failure
+    derivative when ``reverse``; ``fun`` itself when it cannot be compiled (:data:`last_failure`).
+
+    A Function built again with the same expressions (its serialized form: a diagnosis builds
+    the same per-ping model for each of its dozens of candidate models) gets the library loaded
+    the first time, the same Function object: neither its C code generated again to find the
+    library (8 ms) nor its derivatives derived again by CasADi, which keeps them with the object.
+    """
     cc = compiler()
     if cc is None:
+        global last_failure
         last_failure = "no C compiler (gcc, cc or $CC) on PATH"
         return fun
+    key = (hashlib.sha256(fun.serialize().encode()).hexdigest(), reverse, str(cache_dir()), cc)
+    with _loaded_lock:
+        hit = _loaded.get(key)
+        if hit is not None and hit[0].exists():
+            return hit[1]
+        out, path = _load(fun, reverse, cc)
+        if path is not None:
+            if len(_loaded) >= MAX_LOADED:
+                _loaded.clear()
+            _loaded[key] = (path, out)
+        return out
+
+
+def _load(fun: ca.Function, reverse: bool, cc: str) -> tuple[ca.Function, Path | None]:
+    """(the loaded library's Function, its path), building it into the cache if missing; (``fun``, None)
+    when it cannot be built."""
+    global last_failure
     path, code = library_path(fun, reverse)
     if not path.exists():
         try:
@@ -117,12 +144,12 @@ def compiled(fun: ca.Function, reverse: bool = False) -> ca.Function:
                 done = subprocess.run([cc, *flags(), str(source), "-o", str(lib), "-lm"], capture_output=True, text=True)
                 if done.returncode != 0:
                     last_failure = f"{cc} failed on {fun.name()}: {done.stderr.strip().splitlines()[-1:]}"
-                    return fun
+                    return fun, None
                 os.replace(lib, path)  # atomic: another worker's identical library may land first
         except OSError as err:
             last_failure = f"cannot write the cache {path.parent}: {err}"
-            return fun
-    return ca.external(fun.name(), str(path))
+            return fun, None
+    return ca.external(fun.name(), str(path)), path
 
 
 def entries() -> list[Path]:
@@ -136,6 +163,8 @@ def entries() -> list[Path]:
 def clear() -> int:
     """Delete the cached libraries; returns how many."""
     found = entries()
+    with _loaded_lock:
+        _loaded.clear()
     for p in found:
         p.unlink(missing_ok=True)
     return len(found)

@@ -57,6 +57,19 @@ def test_one_compilation_per_model_kept_in_the_named_folder(cache):
     assert compiled.clear() == 2 and compiled.entries() == []
 
 
+def test_a_model_built_again_gets_the_loaded_library_until_the_cache_is_cleared(cache):
+    """The same expressions built twice: one library loaded once, the same Function object (CasADi keeps
+    its derivatives with it); another folder or a cleared cache loads (and builds) it again."""
+    first = compiled.compiled(_model(), reverse=True)
+    assert compiled.compiled(_model(), reverse=True) is first
+    assert compiled.compiled(_model()) is not first  # without the reverse derivative: another library
+    compiled.clear()
+    again = compiled.compiled(_model(), reverse=True)
+    assert again is not first and len(compiled.entries()) == 1
+    x0, p0 = np.array([0.3, -1.2, 2.0]), np.array([0.1, -0.7])
+    assert all(np.array_equal(np.asarray(a), np.asarray(b)) for a, b in zip(first(x0, p0), again(x0, p0)))
+
+
 def test_without_a_compiler_the_interpreted_model_is_returned(cache, monkeypatch):
     monkeypatch.setattr(compiled, "compiler", lambda: None)
     f = _model()

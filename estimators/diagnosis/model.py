@@ -17,6 +17,7 @@ re-estimated without rebuilding.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -32,6 +33,9 @@ from ..statistics.normal_equations import as_sparse, log_det_normal
 # size: a diagnosis refits tens of NLPs, so even a 261-ping file gains (winriver01, random-walk base:
 # 34.8 s interpreted, 24.7 s compiling into an empty cache, 20-21 s with it warm; same numbers to ~1e-8).
 GAP_COMPILE_MIN_PINGS = 0
+# candidate models are built in threads and share their per-ping models' compiled Functions (solvers/compiled.py),
+# whose derivatives CasADi derives on first use and keeps: one model's symbolic build at a time, the solves in parallel
+_BUILD_LOCK = threading.RLock()
 BOUND_TOL = 1e-5  # an unknown this close to a bound, relative to its range (or its scale where larger), is held by it
 
 
@@ -146,6 +150,10 @@ class GapModel:
     """The base model of :class:`DiagnosisBase` plus effects as one NLP over z = x / scale."""
 
     def __init__(self, base: DiagnosisBase, effects=(), peaks: dict | None = None, solver: SolverOptions | None = None):
+        with _BUILD_LOCK:
+            self._build(base, effects, peaks, solver)
+
+    def _build(self, base: DiagnosisBase, effects, peaks, solver):
         self.base = base
         self.effects = [t if isinstance(t, EffectTerm) else EffectTerm(t) for t in effects]
         self.model = model = SurveyModel(base.runs, base.spec, self.effects, peaks, compile_min_pings=GAP_COMPILE_MIN_PINGS)
