@@ -183,10 +183,18 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
         lower = np.concatenate([np.tile([lo, 0.0], k), np.full(A * (1 + 2 * k), -np.inf)])
         upper = np.concatenate([np.tile([hi, MAX_DECAY_1_S], k), np.full(A * (1 + 2 * k), np.inf)])
         w = np.repeat(1.0 / scale, M)
+        last = {}
+
+        def series_at(qq):  # values and Jacobian come together: least_squares asks for the Jacobian where it just evaluated
+            key = qq.tobytes()
+            if last.get("key") != key:
+                last.update(key=key, value=fun(t, qq))
+            return last["value"]
+
         sol = least_squares(
-            lambda qq: w * (fun(t, qq)[0] - Y.T.reshape(-1)),
+            lambda qq: w * (series_at(qq)[0] - Y.T.reshape(-1)),
             np.clip(q0, lower, upper),
-            jac=lambda qq: w[:, None] * fun(t, qq)[1],
+            jac=lambda qq: w[:, None] * series_at(qq)[1],
             bounds=(lower, upper),
             x_scale="jac",
         )
