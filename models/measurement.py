@@ -52,11 +52,12 @@ def bottom_track_function(attitude_fun: ca.Function, timing: str, tangential: st
                        list(ARGUMENTS), ["radial", "range"])
 
 
-def bottom_track_expanded(attitude_fun: ca.Function, timing: str, tangential: str, arguments: list, receive_attitude):
+def bottom_track_expressions(attitude_fun: ca.Function, timing: str, tangential: str, arguments: list,
+                             receive_attitude=None):
     """:func:`bottom_track_function`'s radial (4,) and its receive times (4,) as expressions of
-    ``arguments`` (in :data:`ARGUMENTS`' order), with the attitude at beam i's receive time t
-    taken from ``receive_attitude(i, t)`` (e.g. an expansion about a time where it is already
-    evaluated, :func:`~adcpdyn.models.motion.attitude_expansion`) instead of evaluated there."""
+    ``arguments`` (in :data:`ARGUMENTS`' order). ``receive_attitude(i, t)``, if given, is the
+    attitude at beam i's receive time t in place of ``attitude_fun(t, p)`` (e.g. an expansion
+    about a time where it is already evaluated, :func:`~adcpdyn.models.motion.attitude_expansion`)."""
     echo = _echo(attitude_fun, timing, tangential, *arguments, receive_attitude=receive_attitude)
     return echo["radial"], echo["receive_time"]
 

@@ -28,6 +28,7 @@ The parameters of a model live in one flat vector laid out by
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import casadi as ca
@@ -414,7 +415,7 @@ def attitude_expansion(attitude_fun: ca.Function, t0, p, order: int = 2):
     for out in attitude_fun(t0 + h, p):
         terms, d = [], out
         for k in range(order + 1):
-            terms.append(ca.substitute(d, h, ca.SX(0)) / float(np.prod(np.arange(1, k + 1))))
+            terms.append(ca.substitute(d, h, ca.SX(0)) / math.factorial(k))
             if k < order:
                 d = ca.reshape(ca.jacobian(ca.vec(d), h), d.shape)
         coefficients.append(terms)

@@ -50,8 +50,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..models.measurement import (ARGUMENTS, bottom_track_expanded, bottom_track_function, doppler_system_function,
-                                  echo_function)
+from ..models.measurement import ARGUMENTS, bottom_track_expressions, doppler_system_function, echo_function
 from ..models.motion import (LOCAL_ATTITUDE_SIZE, AttitudeLayout, attitude_expansion, attitude_function,
                              local_attitude_function)
 from ..models.rotations import euler_matrix
@@ -130,12 +129,13 @@ def shared_parameters(attitude_p: np.ndarray, lever_arms_m: np.ndarray, ypr_st_r
     return np.concatenate([attitude_p, np.asarray(lever_arms_m, dtype=float).ravel(), beams_s.ravel(), [g_depth_m]])
 
 
-def _residual_expr(model: _Model, x, q, s):
-    """The measurement model minus the measured radials (4), m/s."""
+def _residual_expr(model: _Model, x, q, s, receive_attitude=None):
+    """The measurement model minus the measured radials (4), m/s, and the model's receive times (4);
+    ``receive_attitude`` as in :func:`~adcpdyn.models.measurement.bottom_track_expressions`."""
     a = model.arguments(q, s)
-    bt = bottom_track_function(model.attitude_function(), model.timing, model.tangential)
-    radial, _ = bt(*_call(a, v_a=x[:3]))
-    return radial + x[3] * model.error_direction() - a["radial"]
+    radial, receive_time = bottom_track_expressions(model.attitude_function(), model.timing, model.tangential,
+                                                    _call(a, v_a=x[:3]), receive_attitude)
+    return radial + x[3] * model.error_direction() - a["radial"], receive_time
 
 
 def _call(a: dict, **more) -> list:
@@ -159,7 +159,7 @@ def _residual(model: _Model) -> ca.Function:
     """``g(x (4), q, s) -> residual (4)`` in m/s (see :meth:`_Model.arguments` for q and s)."""
     x = ca.SX.sym("x", 4)
     q, s = model.symbols()
-    return ca.Function("bottom_track_residual", [x, q, s], [ca.cse(_residual_expr(model, x, q, s))], ["x", "q", "s"], ["g"])
+    return ca.Function("bottom_track_residual", [x, q, s], [ca.cse(_residual_expr(model, x, q, s)[0])], ["x", "q", "s"], ["g"])
 
 
 @functools.lru_cache(maxsize=16)
@@ -201,18 +201,16 @@ def _exact(model: _Model) -> PingFunction:
 
     The residual takes the attitude at the result's receive times as its second-order Taylor
     polynomial about the closed form's (:func:`~adcpdyn.models.motion.attitude_expansion`), where
-    the attitude is already evaluated: a remainder below |d^3 Lambda/dt^3| step^3 / 6, 1e-12 at
-    ``EXPANSION_MAX_STEP_S`` for motions of 1 rad/s^3 (the step is ~2e-5 s in 300 m of water);
+    the attitude is already evaluated: a remainder below |d^3 Lambda/dt^3| step^3 / 6, 1.3e-12 per
+    rad/s^3 at ``EXPANSION_MAX_STEP_S`` (the step is ~2e-5 s in 300 m of water);
     pings farther get the residual evaluated at their receive times (:func:`solve_bottom_track`).
     """
     q, s = model.symbols()
     _, _, t0, x0 = _closed_form_expr(model, q, s)
     x1 = _newton_step(model, x0, t0, q, s)
-    a = model.arguments(q, s)
-    about = [attitude_expansion(model.attitude_function(), t0[i], a["p"], EXPANSION_ORDER) for i in range(4)]
-    radial, receive_time = bottom_track_expanded(model.attitude_function(), model.timing, model.tangential,
-                                                 _call(a, v_a=x1[:3]), lambda i, t: about[i](t))
-    g = radial + x1[3] * model.error_direction() - a["radial"]
+    p = model.arguments(q, s)["p"]
+    about = [attitude_expansion(model.attitude_function(), t0[i], p, EXPANSION_ORDER) for i in range(4)]
+    g, receive_time = _residual_expr(model, x1, q, s, lambda i, t: about[i](t))
     step = ca.mmax(ca.fabs(receive_time - t0))
     return PingFunction(ca.Function("bottom_track_exact", [q, s], ca.cse([x1, g, step]), ["q", "s"], ["x", "g", "step"]))
 
@@ -224,7 +222,7 @@ def _newton(model: _Model) -> PingFunction:
     q, s = model.symbols()
     T = _linearised(model)(x, ca.SX.zeros(4), q, s)[3]  # the model's receive times do not depend on t_R
     x1 = _newton_step(model, x, T, q, s)
-    return PingFunction(ca.Function("bottom_track_newton", [x, q, s], ca.cse([x1, _residual_expr(model, x1, q, s)]),
+    return PingFunction(ca.Function("bottom_track_newton", [x, q, s], ca.cse([x1, _residual_expr(model, x1, q, s)[0]]),
                                     ["x", "q", "s"], ["x_next", "g"]))
 
 
