@@ -123,6 +123,16 @@ class RowJacobian:
 
     def _evaluate(self, i: int, v: np.ndarray, s: np.ndarray):
         """Per-row Jacobians of block i, (n, k, 3) and (n, k, ns), through a zero-copy FunctionBuffer."""
+        parts, out = self._prepare(i, v, s)
+        self._map(lambda part: part[1](), parts)
+        return out
+
+    def _map(self, fun, items) -> list:
+        """``[fun(item) ...]`` on this Jacobian's threads (CasADi and numpy's products release Python's lock)."""
+        return list(self._pool.map(fun, items)) if self._pool is not None else [fun(item) for item in items]
+
+    def _prepare(self, i: int, v: np.ndarray, s: np.ndarray):
+        """Block i's evaluation buffers (one per row chunk, run to fill ``out``) set to (v, s): (parts, out)."""
         buffers = getattr(self._local, "buffers", None)
         if buffers is None:
             buffers = self._local.buffers = [None] * len(self._jac)
@@ -143,12 +153,7 @@ class RowJacobian:
         for (buf, _), (lo, hi) in zip(parts, self._chunks[i]):
             buf.set_arg(1, memoryview(v_in[lo:hi]))
             buf.set_arg(2, memoryview(s_in))
-        if self._pool is None:
-            for _, run in parts:
-                run()
-        else:
-            list(self._pool.map(lambda part: part[1](), parts))
-        return out
+        return parts, out
 
     def _has_knots(self, index: int) -> bool:
         return self.blocks[index].velocity_basis is not None and self._knots[index] is not None
@@ -305,19 +310,26 @@ class RowJacobian:
                 continue
             k, n = b.fun.size1_out(0), b.data.shape[1]
             sc = self._cols[index]
-            _, js = self._evaluate(index, np.zeros((n, 3)), s[self._index[index]])
+            parts, (_, js) = self._prepare(index, np.zeros((n, 3)), s[self._index[index]])
             sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
             rows = slice(b.offset, b.offset + k * n)
             a = (w[rows].reshape(k, n) * sign[:, None]).T  # (n, k): row j's output i weighted and signed
             ea = None if e is None else np.asarray(e[rows]).reshape(k, n).T
             ns = js.shape[2]
-            M, g = np.zeros((ns, ns)), np.zeros(ns)
-            for lo in range(0, n, GRAM_ROWS):
-                hi = min(lo + GRAM_ROWS, n)
-                jw = (js[lo:hi] * a[lo:hi, :, None]).reshape(-1, ns)
-                M += jw.T @ jw
-                if ea is not None:
-                    g += jw.T @ ea[lo:hi].ravel()
+
+            def chunk(c):  # evaluate one chunk of rows and sum its share while it is fresh, on the chunk's thread
+                parts[c][1]()
+                M, g = np.zeros((ns, ns)), np.zeros(ns)
+                for lo in range(*self._chunks[index][c], GRAM_ROWS):
+                    hi = min(lo + GRAM_ROWS, self._chunks[index][c][1])
+                    jw = (js[lo:hi] * a[lo:hi, :, None]).reshape(-1, ns)
+                    M += jw.T @ jw
+                    if ea is not None:
+                        g += jw.T @ ea[lo:hi].ravel()
+                return M, g
+
+            sums = self._map(chunk, range(len(parts)))
+            M, g = sum(m for m, _ in sums), sum(v for _, v in sums)
             ds_b = ds_dz[self._index[index]][:, sc].toarray()
             G[np.ix_(sc, sc)] += ds_b.T @ M @ ds_b
             if grad is not None:
@@ -328,6 +340,40 @@ class RowJacobian:
             if grad is not None:
                 grad += gk
         return G, grad
+
+    def matmul(self, z, w, M) -> np.ndarray:
+        """J @ M (n_rows, q) for M (n_z, q), J never formed: a block without knots maps M through its
+        shared inputs first, (w sign js) (ds M), the others go through :meth:`_parts`. The HAC
+        sandwich needs only J @ P_q: a CSR J of 10^5 pings costs five times this to build and multiply."""
+        M = np.asarray(M, dtype=float)
+        M2 = M.reshape(M.shape[0], -1)
+        out = np.zeros((self.n_rows, M2.shape[1]))  # rows no block holds (none today) are zero, as in J
+        w = np.asarray(w, dtype=float).ravel()
+        s, ds_dz = self._shared_at(z)
+        knotted = []
+        for index, b in enumerate(self.blocks):
+            if self._has_knots(index):
+                knotted.append(index)
+                continue
+            k, n = b.fun.size1_out(0), b.data.shape[1]
+            sc = self._cols[index]
+            _, js = self._evaluate(index, np.zeros((n, 3)), s[self._index[index]])
+            sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
+            B = ds_dz[self._index[index]][:, sc].toarray() @ M2[sc]  # (ns, q)
+            a = (w[b.offset:b.offset + k * n].reshape(k, n) * sign[:, None]).T  # (n, k)
+            jb = (js.reshape(n * k, -1) @ B).reshape(n, k, -1)  # one product; rows ping-major
+            jb *= a[:, :, None]
+            out[b.offset:b.offset + k * n].reshape(k, n, -1)[...] = jb.transpose(1, 0, 2)  # output-major, as J's rows
+        for r, sc, shared, knot_part in self._parts(z, w, only=knotted):
+            rows = out[r[0]:r[-1] + 1]
+            rows[...] = shared @ M2[sc]
+            if knot_part is not None:
+                rows += knot_part @ M2
+        return out.reshape((self.n_rows,) + M.shape[1:])
+
+    def at(self, z, w) -> "JacobianAt":
+        """J at (z, w) as an operator (``J @ M``, ``shape``), for what needs only its products."""
+        return JacobianAt(self, z, w)
 
     def _shared_at(self, z):
         """s(z) (flat) and ds/dz (CSR)."""
@@ -362,3 +408,18 @@ class RowJacobian:
                 if grad is not None:
                     grad[kc] += kp.T @ e[r[0]:r[-1] + 1]
         return G, grad
+
+
+class JacobianAt:
+    """J(z, w) of a :class:`RowJacobian` as an operator: ``J @ M`` from its blocks, J never formed."""
+
+    def __init__(self, jacobian: RowJacobian, z, w):
+        self._jac = jacobian
+        self._z, self._w = np.array(z, dtype=float), np.array(w, dtype=float)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self._jac.n_rows, self._jac.n_z
+
+    def __matmul__(self, M) -> np.ndarray:
+        return self._jac.matmul(self._z, self._w, M)

@@ -396,6 +396,10 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     assert np.max(np.abs(assembled.toarray() - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
     gram = symbolic.T @ symbolic  # the Gauss-Newton Hessian's J^T J, formed block by block without J
     assert np.max(np.abs(problems["assembled"].jacobian_fun.gram(z, w) - gram)) < 1e-9 * np.max(np.abs(gram))
+    # J's products without J (the sandwich's J @ P_Q), knots or not
+    M = np.random.default_rng(3).standard_normal((symbolic.shape[1], 4))
+    JM = problems["assembled"].jacobian_fun.at(z, w) @ M
+    assert JM.shape == (symbolic.shape[0], 4) and np.max(np.abs(JM - symbolic @ M)) < 1e-9 * np.max(np.abs(symbolic @ M))
     pattern = problems["assembled"].jacobian_fun.sparsity.astype(float)
     assert np.all((symbolic != 0) <= pattern.toarray())
     # J^T J's pattern from the blocks' structure is the product of J's pattern

@@ -125,6 +125,8 @@ def test_joint_problem_is_block_sparse_and_its_assembled_jacobian_is_casadis(sur
     assert np.max(np.abs(assembled.toarray() - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
     gram = symbolic.T @ symbolic
     assert np.max(np.abs(problems["assembled"].jacobian_fun.gram(z, w) - gram)) < 1e-9 * np.max(np.abs(gram))
+    JM = problems["assembled"].jacobian_fun.at(z, w) @ np.eye(symbolic.shape[1])  # J column by column, never formed
+    assert np.max(np.abs(JM - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
     u = p.model.unknowns
     rows = p.model.row_run
     for k, other in ((0, 1), (1, 0)):

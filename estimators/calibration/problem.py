@@ -536,9 +536,12 @@ class CalibrationProblem:
         w = self.weights()
         e = np.asarray(self.residual_fun(ms.x, w)[0]).ravel()
         # an assembled one stays sparse (rows x unknowns), its J^T J from the same pass; a random walk's
-        # (a velocity per ping) sparse too
+        # (a velocity per ping) sparse too; on knots only J's products are needed (the information is
+        # J^T J, the sandwich J @ P_Q): J stays an operator on its blocks, never formed
         information = None
-        if self.assembled:
+        if self.assembled and not self.walk:
+            J, information = self.jacobian_fun.at(ms.x, w), self.jacobian_fun.gram(ms.x, w)
+        elif self.assembled:
             J, information = self.jacobian_fun.jacobian_and_gram(ms.x, w)
         else:
             J = self.jacobian_fun(ms.x, w)
