@@ -34,7 +34,8 @@ Conventions of the exported file:
 - Provenance: files named by absolute path and SHA-256.
 - Radial velocities follow CF's ``radial_velocity_of_scatterers_away_from_instrument``:
   positive away from the transducer, the opposite of TRDI's (and the case's) convention.
-- Missing values are NaN (``_FillValue`` NaN).
+- Missing values are NaN (``_FillValue`` NaN); ``beams_used`` (int8) declares netCDF's byte fill, -127,
+  which it never holds (xarray then reads it as floats; ``mask_and_scale=False`` keeps the integers).
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ from .hashing import adcpdyn_version, sha256_of
 from .importers.rdi_frames import CASE_FROM_RDI_BEAM
 
 ENGINE = "h5netcdf"
+BEAMS_USED_FILL = np.int8(-127)  # netCDF's default fill of a byte variable: outside the counts 0-4
 
 
 # ----------------------------------------------------------------------------------------------- helpers
@@ -203,11 +205,12 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     else:  # no dates: the case clock's seconds are the pings' coordinate
         ds = ds.swap_dims({"time": "case_time"})
     for name in ds.variables:
-        if name in ds.dims:  # coordinate variables hold no missing values; integers none either (a fill value
-            # would make xarray read beams_used as floats)
+        if name in ds.dims:  # coordinate variables hold no missing values
             ds[name].encoding["_FillValue"] = None
         elif ds[name].dtype.kind == "f":
             ds[name].encoding["_FillValue"] = np.nan
+        elif name == "beams_used":  # never written (every ping has a count, 0-4); xarray reads it as floats
+            ds[name].encoding["_FillValue"] = BEAMS_USED_FILL
     return describe(ds, case, provenance, as_attribution(attribution))
 
 
@@ -392,7 +395,7 @@ def _correction_variables(case, correction, data: dict, attrs: dict) -> None:
         "units": "m s-1", "long_name": "error velocity of the bottom-track solution (NaN with fewer than four beams)"})
     data["beams_used"] = (("time",), np.asarray(correction.beams_used, dtype=np.int8), {
         "standard_name": "number_of_observations", "units": "1",
-        "long_name": "number of beams in the bottom-track solution"})
+        "long_name": "number of beams in the bottom-track solution", "valid_range": np.array([0, 4], dtype=np.int8)})
     if correction.water_velocity_m_s is not None and "depth" in _dims_of(data):
         reference = s.water_reference or "bt"
         note = s.water_reference_note

@@ -148,3 +148,16 @@ def test_a_correction_records_when_its_calibration_was_made(tmp_path):
         assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?Z", written)
     with xr.open_dataset(tmp_path / "none.nc", engine="h5netcdf") as ds:
         assert "calibration_date" not in ds["adcp"].attrs
+
+
+def test_beams_used_declares_a_fill_value_it_never_holds(tmp_path):
+    """IOOS asks every data variable for _FillValue and missing_value: beams_used (int8) has netCDF's byte fill,
+    outside its valid range 0-4, and keeps its counts (as integers without xarray's masking)."""
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    result = api.correct(case_path, "asc", out=tmp_path / "c.nc")
+    with xr.open_dataset(tmp_path / "c.nc", engine="h5netcdf", mask_and_scale=False) as ds:
+        used = ds["beams_used"]
+        assert used.dtype == "int8" and used.attrs["_FillValue"] == used.attrs["missing_value"] == -127
+        assert list(used.attrs["valid_range"]) == [0, 4]
+        assert (used.values == result.beams_used).all()
