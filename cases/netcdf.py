@@ -181,7 +181,8 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     calibrated = None if applied is None else applied.transducer_depth_calibrated_m
     entered = None if applied is None else applied.transducer_depth_entered_m  # None in files written before it was
     written = ((applied.calibration_provenance or {}).get("written_utc") if applied is not None else None)
-    data[ADCP] = _instrument_variable(case, calibrated, entered, written)  # recorded: the case's
+    calibrated_by = None if applied is None or applied.calibration_file == "none" else applied.calibration_file
+    data[ADCP] = _instrument_variable(case, calibrated, entered, written, calibrated_by)  # recorded: the case's
     if case.water is not None:
         coords["depth"] = ("depth", np.asarray(case.water.cell_depth_m, dtype=np.float64), {
             "standard_name": "depth", "long_name": "depth of the cell centre below the surface", "units": "m",
@@ -214,10 +215,12 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     return describe(ds, case, provenance, as_attribution(attribution))
 
 
-def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None, calibration_utc=None) -> tuple:
+def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None, calibration_utc=None,
+                         calibration_file=None) -> tuple:
     """The ADCP as a container variable (IOOS-1.2): what it is and how deep its transducer sat (as calibrated
     and used by a correction, and as entered; the case's when the entered depth is not recorded), and when the
-    calibration a correction applied was made (``calibration_utc``, its CALIB.json's ``written_utc``)."""
+    calibration a correction applied was made (``calibration_utc``, its CALIB.json's ``written_utc``); without
+    that date no ``calibration_date`` (none is invented), a comment saying why."""
     ins = case.instrument
     entered = float(case.environment.transducer_depth_m if entered_depth_m is None else entered_depth_m)
     attrs = {"long_name": "the ADCP (a container variable: its value means nothing)",
@@ -233,6 +236,11 @@ def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None, c
         attrs["calibration_date"] = str(calibration_utc)
         attrs["calibration_date_comment"] = ("when the adcpdyn calibration the correction applied (lever arms, installation "
                                              "angles, compass) was computed: its CALIB.json's written_utc")
+    else:
+        applied = (f"the calibration the correction applied ({calibration_file}) records no written_utc"
+                   if calibration_file else "no adcpdyn calibration (CALIB.json) was applied to these data")
+        attrs["calibration_date_comment"] = (f"no calibration date: {applied}, and the case holds no date of the "
+                                             "instrument's own calibration (adcpdyn reads none from instrument files)")
     return (), np.int32(0), attrs
 
 
