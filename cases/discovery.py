@@ -29,9 +29,10 @@ from .attribution import Attribution
 CONVENTIONS = "CF-1.8, ACDD-1.3, IOOS-1.2"
 STANDARD_NAME_TABLE = "CF Standard Name Table v93"  # the table the export's names were checked against
 STANDARD_NAME_URL = "https://cfconventions.org/Data/cf-standard-names/93/build/cf-standard-name-table.html#{}"
-METHOD_REFERENCE = ("Sun Z., Yao S., Gao N., Zhang K. (2024) An ADCP attitude dynamic errors correction method based "
-                    "on angular velocity tensor and radius vector estimation. J. Mar. Sci. Eng. 12, 2018 (the "
-                    "corrections adcpdyn implements, static (ASC) and dynamic)")
+PAPER = ("Sun Z., Yao S., Gao N., Zhang K. (2024) An ADCP attitude dynamic errors correction method based on angular "
+         "velocity tensor and radius vector estimation. J. Mar. Sci. Eng. 12, 2018")
+METHOD_REFERENCE = PAPER + " (the corrections adcpdyn implements, static (ASC) and dynamic)"
+SIMULATION_REFERENCE = PAPER + " (the echo equations adcpdyn's simulator evaluates: Eqs. 65-70 and 88)"
 GCMD_OCEAN_CURRENTS = "EARTH SCIENCE > OCEANS > OCEAN CIRCULATION > OCEAN CURRENTS"
 VESSEL, ADCP = "vessel", "adcp"  # the IOOS platform and instrument container variables
 TRAJECTORY = "trajectory"  # the instance dimension of the one vessel track (length 1)
@@ -147,9 +148,19 @@ def _global_attributes(ds, case, provenance, attribution: Attribution, feature, 
     out.update(_time_coverage(ds))
     out.update(_geospatial(ds))
     stated = attribution.global_attributes()
-    if method:
-        stated["references"] = ", ".join(x for x in (stated.get("references"), METHOD_REFERENCE) if x)
+    references = [x for x in (stated.get("references"), *_references(case, provenance, method)) if x]
+    if references:
+        stated["references"] = ", ".join(references)
     out.update(stated)
+    return out
+
+
+def _references(case, provenance, method) -> list[str]:
+    """What describes how the data were made: the paper of the correction (or of the simulator's equations) and
+    the reader that decoded the instrument file."""
+    out = [METHOD_REFERENCE] if method else [SIMULATION_REFERENCE] if case.truth is not None else []
+    if "reader" in provenance:
+        out.append(f"instrument file decoded by {provenance['reader']} (the reader of adcpdyn's importer)")
     return out
 
 

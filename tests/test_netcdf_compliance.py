@@ -162,3 +162,22 @@ def test_beams_used_declares_a_fill_value_it_never_holds(tmp_path):
         assert used.dtype == "int8" and used.attrs["_FillValue"] == used.attrs["missing_value"] == -127
         assert list(used.attrs["valid_range"]) == [0, 4]
         assert (used.values == result.beams_used).all()
+
+
+def test_references_say_how_the_data_were_made(tmp_path):
+    """references (IOOS-1.2) on every export with a known origin: the correction's paper, or the simulator's
+    equations for a simulated case, and the reader of an imported instrument file; the user's first."""
+    from adcpdyn.cases.discovery import METHOD_REFERENCE, SIMULATION_REFERENCE
+
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    assert api.to_xarray(case_path).attrs["references"] == SIMULATION_REFERENCE
+    corrected = api.correct(case_path, "asc")
+    assert api.to_xarray(case_path, corrected).attrs["references"] == METHOD_REFERENCE
+    stated = dataclasses.replace(read_attribution(ATTRIBUTION), references="https://example.org/report")
+    assert api.to_xarray(case_path, attribution=stated).attrs["references"] == (
+        f"https://example.org/report, {SIMULATION_REFERENCE}")
+    imported = tmp_path / "rp.h5"
+    api.import_file(real("RiverPro_test01.PD0"), out=imported)
+    refs = api.to_xarray(imported).attrs["references"]
+    assert refs.startswith("instrument file decoded by mhkit") and SIMULATION_REFERENCE not in refs
