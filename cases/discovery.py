@@ -34,6 +34,10 @@ PAPER = ("Sun Z., Yao S., Gao N., Zhang K. (2024) An ADCP attitude dynamic error
 METHOD_REFERENCE = PAPER + " (the corrections adcpdyn implements, static (ASC) and dynamic)"
 SIMULATION_REFERENCE = PAPER + " (the echo equations adcpdyn's simulator evaluates: Eqs. 65-70 and 88)"
 GCMD_OCEAN_CURRENTS = "EARTH SCIENCE > OCEANS > OCEAN CIRCULATION > OCEAN CURRENTS"
+GCMD_ADCP = "ADCP > Acoustic Doppler Current Profiler"  # GCMD instrument keyword (Profilers/Sounders > Acoustic Sounders)
+# the platform category of a vessel-mounted ADCP when the attribution states none: IOOS's "ship" (= SeaVoX L06 30,
+# a surface vessel; the vocabulary IOOS-1.2 recommends); the files do not record the vessel's size
+PLATFORM_CATEGORY, PLATFORM_VOCABULARY = "ship", "https://mmisw.org/ont/ioos/platform"
 VESSEL, ADCP = "vessel", "adcp"  # the IOOS platform and instrument container variables
 TRAJECTORY = "trajectory"  # the instance dimension of the one vessel track (length 1)
 NOT_DETERMINED = "not determined"
@@ -132,12 +136,17 @@ def _global_attributes(ds, case, provenance, attribution: Attribution, feature, 
         "product_version": ds.attrs.get("adcpdyn_version", ""),
         "processing_level": (f"corrected by adcpdyn (method {method}): vessel and water velocities in ENU" if method
                              else "instrument records in SI units, radial velocities per beam; not corrected"),
-        "instrument": sensor + _gnss(ds),
-        "platform": "vessel",
+        "instrument": GCMD_ADCP,
+        "instrument_vocabulary": "GCMD Instrument Keywords",
+        "platform": PLATFORM_CATEGORY,
+        "platform_vocabulary": PLATFORM_VOCABULARY,
         "platform_name": f"vessel carrying the {sensor}",
         "comment": ("velocities in ENU (east, north, up); radial velocities positive away from the transducer; "
                     "accuracy and precision not determined: the instrument's specification is not in its file. "
-                    "See earth_frame, beam_numbering, time_origin_utc."),
+                    "See earth_frame, beam_numbering, time_origin_utc."
+                    + ("" if attribution.platform else
+                       f" platform: IOOS's category {PLATFORM_CATEGORY!r} for the vessel carrying the ADCP (its size is "
+                       "not recorded; an attribution file states another category)")),
     }
     if feature:
         out["featureType"] = feature
@@ -162,11 +171,6 @@ def _references(case, provenance, method) -> list[str]:
     if "reader" in provenance:
         out.append(f"instrument file decoded by {provenance['reader']} (the reader of adcpdyn's importer)")
     return out
-
-
-def _gnss(ds) -> str:
-    what = [w for w, there in (("reference velocity", "reference_speed" in ds), ("positions", "latitude" in ds)) if there]
-    return f"; GNSS receiver ({' and '.join(what)})" if what else ""
 
 
 def _title(ds, case, sensor: str, method) -> str:

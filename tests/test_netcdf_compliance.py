@@ -181,3 +181,21 @@ def test_references_say_how_the_data_were_made(tmp_path):
     api.import_file(real("RiverPro_test01.PD0"), out=imported)
     refs = api.to_xarray(imported).attrs["references"]
     assert refs.startswith("instrument file decoded by mhkit") and SIMULATION_REFERENCE not in refs
+
+
+def test_platform_and_instrument_name_their_vocabularies(tmp_path):
+    """The platform category (IOOS's ship unless the attribution states one) and the instrument (GCMD's ADCP
+    keyword) come with the vocabularies they are from; the make and model stay in the title and on adcp."""
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    plain = api.to_xarray(case_path)
+    assert (plain.attrs["platform"], plain.attrs["platform_vocabulary"]) == ("ship", "https://mmisw.org/ont/ioos/platform")
+    assert "size is not recorded" in plain.attrs["comment"]
+    assert plain.attrs["instrument"] == "ADCP > Acoustic Doppler Current Profiler"
+    assert plain.attrs["instrument_vocabulary"] == "GCMD Instrument Keywords"
+    assert plain["adcp"].attrs["make_model"] in plain.attrs["title"]
+    boat = dataclasses.replace(read_attribution(ATTRIBUTION), platform="boat",
+                               platform_vocabulary="https://example.org/platforms")
+    stated = api.to_xarray(case_path, attribution=boat).attrs
+    assert (stated["platform"], stated["platform_vocabulary"]) == (boat.platform, boat.platform_vocabulary)
+    assert "size is not recorded" not in stated["comment"]
