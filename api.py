@@ -475,11 +475,12 @@ def correct(case, method: str = "asc", calibration=None, *, timing: str = "deep"
     _choice("method", method, CORRECTION_METHODS)
     _choice("timing", timing, TIMINGS)
     _choice("reference", reference, REFERENCES)
-    if attribution is not None and (out is None or Path(out).suffix.lower() != ".nc"):
+    netcdf = out is not None and Path(out).suffix.lower() == ".nc"
+    if attribution is not None and not netcdf:
         raise ValueError(f"attribution: only with out=OUT.nc (netCDF), got out={None if out is None else str(out)!r}")
     from .cases.attribution import as_attribution
 
-    attribution = as_attribution(attribution)  # a bad file fails before the work
+    attribution = as_attribution(attribution) if netcdf else None  # a bad file (or ADCPDYN_ATTRIBUTION) fails first
     if out is not None:
         from .cases.atomic import check_output_file
 
@@ -745,7 +746,9 @@ def to_xarray(case, correction: "Correction | None" = None, *, history: str | No
     attribution : str, os.PathLike or Attribution, optional
         Who made and distributes the data: creator, publisher, institution, licence, naming
         authority (ACDD-1.3, IOOS-1.2), as a TOML file of those attributes or an
-        :class:`~adcpdyn.cases.attribution.Attribution`; ``not stated`` without it.
+        :class:`~adcpdyn.cases.attribution.Attribution`; without it the TOML file named by the
+        environment variable ``ADCPDYN_ATTRIBUTION`` when set, else ``not stated``. A file is named in
+        the attributes by absolute path and SHA-256.
 
     Returns
     -------

@@ -785,8 +785,10 @@ def build_parser() -> argparse.ArgumentParser:
     def attribution_option(s):
         s.add_argument("--attribution", metavar="ORG.toml",
                        help="netCDF: who made and distributes the data (creator_*, publisher_*, institution, license, "
-                            "naming_authority, infoUrl, ...: ACDD-1.3/IOOS-1.2 attribute names); 'not stated' without "
-                            "it (docs/examples/attribution.toml)")
+                            "naming_authority, infoUrl, ...: ACDD-1.3/IOOS-1.2 attribute names; "
+                            "docs/examples/attribution.toml); default: the file named by the environment variable "
+                            "ADCPDYN_ATTRIBUTION, when set, else 'not stated'. The file is named in the export with "
+                            "its SHA-256")
 
     command("scenarios", "list the built-in scenarios", cmd_scenarios)
 

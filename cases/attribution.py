@@ -14,10 +14,15 @@ states them, read once from a TOML file of global attribute names (``adcpdyn exp
 What the user does not state is written ``not stated`` where the attribute is free text that
 ACDD recommends or IOOS requires (names, institutions, countries, licence); addresses, e-mails
 and URLs are left out rather than invented, and ``creator_sector`` is IOOS's own ``unknown``.
+
+Without ``--attribution`` the file named by the environment variable ``ADCPDYN_ATTRIBUTION`` is
+read, when set (a survey office states its identity once); either way the export names the file
+used by absolute path and SHA-256 (:class:`AttributionFile`).
 """
 
 from __future__ import annotations
 
+import os
 import re
 import tomllib
 from dataclasses import dataclass, fields
@@ -25,6 +30,7 @@ from pathlib import Path
 
 
 NOT_STATED = "not stated"
+ENVIRONMENT = "ADCPDYN_ATTRIBUTION"  # the default attribution file, when --attribution is not given
 PARTY_TYPES = ("person", "group", "institution", "position")
 # IOOS-1.2 creator_sector (https://mmisw.org/ont/ioos/sector)
 SECTORS = ("academic", "gov_federal", "gov_municipal", "gov_state", "industry", "nonprofit", "other", "tribal",
@@ -141,35 +147,62 @@ def _check(name: str, value: str | None, pattern: re.Pattern, expected: str) -> 
         raise ValueError(f"{name}: expected {expected}, got {value!r}")
 
 
-def read_attribution(path) -> Attribution:
+@dataclass(frozen=True)
+class AttributionFile:
+    """An :class:`Attribution` read from a TOML file, and which file: the export records it."""
+
+    attribution: Attribution
+    path: str  # absolute
+    sha256: str
+    given_by: str  # "--attribution" or ENVIRONMENT
+
+    def provenance_attributes(self) -> dict:
+        """``attribution_file``, ``attribution_sha256`` and ``attribution_from`` (the option or the variable)."""
+        given = "the environment variable " + ENVIRONMENT if self.given_by == ENVIRONMENT else "the attribution option"
+        return {"attribution_file": self.path, "attribution_sha256": self.sha256, "attribution_from": given}
+
+
+def read_attribution(path, option: str = "--attribution") -> Attribution:
     """An :class:`Attribution` from a TOML file of global attribute names and string values.
 
     Raises
     ------
     ValueError
-        One line naming the file and the key: unreadable TOML, an unknown attribute, a value of
-        the wrong form (an e-mail, a URL, a vocabulary term).
+        One line naming ``option`` (how the file was given), the file and the key: unreadable
+        TOML, an unknown attribute, a value of the wrong form (an e-mail, a URL, a vocabulary term).
     """
     path = Path(path)
     try:
         with open(path, "rb") as fh:
             data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ValueError(f"--attribution: {path}: no such file") from None
+    except (FileNotFoundError, IsADirectoryError):
+        raise ValueError(f"{option}: {path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"--attribution: {path}: expected TOML, got a parse error ({exc})") from None
+        raise ValueError(f"{option}: {path}: expected TOML, got a parse error ({exc})") from None
     known = {f.name for f in fields(Attribution)}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise ValueError(f"--attribution: {path.name}: unknown attribute(s) {unknown}; expected some of {sorted(known)}")
+        raise ValueError(f"{option}: {path.name}: unknown attribute(s) {unknown}; expected some of {sorted(known)}")
     try:
         return Attribution(**data)
     except ValueError as exc:
-        raise ValueError(f"--attribution: {path.name}: {exc}") from None
+        raise ValueError(f"{option}: {path.name}: {exc}") from None
 
 
-def as_attribution(value) -> Attribution | None:
-    """None, an :class:`Attribution`, or one read from a TOML path (:func:`read_attribution`)."""
-    if value is None or isinstance(value, Attribution):
+def read_attribution_file(path, option: str = "--attribution") -> AttributionFile:
+    """:func:`read_attribution` with the file's absolute path and SHA-256."""
+    from .hashing import sha256_of
+
+    stated = read_attribution(path, option)
+    return AttributionFile(stated, str(Path(path).resolve()), sha256_of(path), option)
+
+
+def as_attribution(value) -> Attribution | AttributionFile | None:
+    """An :class:`Attribution` (or :class:`AttributionFile`) as given, one read from a TOML path, or without
+    one the file named by ``ADCPDYN_ATTRIBUTION`` (None when the variable is unset or empty)."""
+    if isinstance(value, (Attribution, AttributionFile)):
         return value
-    return read_attribution(value)
+    if value is not None:
+        return read_attribution_file(value)
+    default = os.environ.get(ENVIRONMENT, "").strip()
+    return read_attribution_file(default, ENVIRONMENT) if default else None

@@ -47,7 +47,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .attribution import as_attribution
+from .attribution import AttributionFile, as_attribution
 from .case import Case, parse_utc
 from .discovery import ADCP, NOT_DETERMINED, describe
 from .hashing import adcpdyn_version, sha256_of
@@ -131,7 +131,8 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
         What produced the export (a command line), for the ``history`` attribute.
     attribution : Attribution or path, optional
         Who made and distributes the data, their licence and naming authority (an
-        :class:`~adcpdyn.cases.attribution.Attribution` or its TOML file); ``not stated`` without it.
+        :class:`~adcpdyn.cases.attribution.Attribution` or its TOML file, named with its SHA-256 in the
+        attributes); without it the file named by ``ADCPDYN_ATTRIBUTION`` when set, else ``not stated``.
 
     Returns
     -------
@@ -147,6 +148,7 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     import xarray as xr
 
     provenance = dict(provenance or {})
+    stated = as_attribution(attribution)  # a bad file fails before the work
     N = case.pings.n
     t_values, t_attrs, t_enc, origin_note = _time_coordinate(case)
     beam_no, beam_note = instrument_beams(provenance)
@@ -196,6 +198,9 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
     _attitude_variables(case, data)
     _site_variables(case, data, coords)
     attrs = _global_attributes(case, provenance, source_case_path, origin_note, beam_note, history)
+    if isinstance(stated, AttributionFile):
+        attrs.update(stated.provenance_attributes())
+        stated = stated.attribution
     if correction is not None:
         _correction_variables(case, correction, data, attrs)
         _absolute_paths(attrs)
@@ -212,7 +217,7 @@ def to_xarray(case: Case, correction=None, *, provenance: dict | None = None, so
             ds[name].encoding["_FillValue"] = np.nan
         elif name == "beams_used":  # never written (every ping has a count, 0-4); xarray reads it as floats
             ds[name].encoding["_FillValue"] = BEAMS_USED_FILL
-    return describe(ds, case, provenance, as_attribution(attribution))
+    return describe(ds, case, provenance, stated)
 
 
 def _instrument_variable(case: Case, calibrated_depth_m, entered_depth_m=None, calibration_utc=None,

@@ -34,6 +34,13 @@ def with_doppler(scenario, **changes):
     return dataclasses.replace(scenario, run=dataclasses.replace(scenario.run, doppler=dm))
 
 
+@pytest.fixture(autouse=True)
+def _no_default_attribution(monkeypatch):
+    """A survey office's ADCPDYN_ATTRIBUTION would change every netCDF export the tests check: unset unless a
+    test sets it."""
+    monkeypatch.delenv("ADCPDYN_ATTRIBUTION", raising=False)
+
+
 @pytest.fixture(scope="session")
 def pool_m0():
     return get_scenario("pool_m0")

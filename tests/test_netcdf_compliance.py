@@ -72,7 +72,8 @@ def test_the_checker_check_can_fail(tmp_path):
     case_path = tmp_path / "river.h5"
     api.simulate("river_survey", seed=2, out=case_path)
     ds = api.to_xarray(case_path, attribution=ATTRIBUTION)
-    for key in ("title", "summary", "keywords", "creator_email", "publisher_url", "time_coverage_start", "featureType"):
+    for key in ("title", "summary", "keywords", "creator_email", "publisher_url", "time_coverage_start", "featureType",
+                "references", "platform_vocabulary", "instrument_vocabulary"):
         del ds.attrs[key]
     for var in ds.variables.values():
         var.attrs.pop("coverage_content_type", None)
@@ -199,3 +200,41 @@ def test_platform_and_instrument_name_their_vocabularies(tmp_path):
     stated = api.to_xarray(case_path, attribution=boat).attrs
     assert (stated["platform"], stated["platform_vocabulary"]) == (boat.platform, boat.platform_vocabulary)
     assert "size is not recorded" not in stated["comment"]
+
+
+def test_the_environment_names_a_default_attribution_and_the_export_names_the_file(tmp_path, monkeypatch, capsys):
+    """ADCPDYN_ATTRIBUTION applies when --attribution is not given, checked the same way; the export records
+    which file (absolute path, SHA-256, given by the option or the variable); --attribution wins."""
+    from adcpdyn.cases.hashing import sha256_of
+
+    case_path = tmp_path / "river.h5"
+    api.simulate("river_survey", seed=2, out=case_path)
+    stated = read_attribution(ATTRIBUTION)
+    monkeypatch.setenv("ADCPDYN_ATTRIBUTION", str(ATTRIBUTION))
+    assert main(["export", str(case_path), "--out", str(tmp_path / "env.nc")]) == 0
+    assert main(["correct", str(case_path), "--out", str(tmp_path / "env_asc.nc")]) == 0
+    for name in ("env.nc", "env_asc.nc"):
+        with xr.open_dataset(tmp_path / name, engine="h5netcdf") as ds:
+            assert ds.attrs["creator_email"] == stated.creator_email and ds.attrs["license"] == stated.license
+            assert ds.attrs["attribution_file"] == str(ATTRIBUTION.resolve())
+            assert ds.attrs["attribution_sha256"] == sha256_of(ATTRIBUTION)
+            assert ds.attrs["attribution_from"] == "the environment variable ADCPDYN_ATTRIBUTION"
+    (tmp_path / "own.toml").write_text('creator_name = "Someone Else"\n')
+    own = api.to_xarray(case_path, attribution=tmp_path / "own.toml").attrs
+    assert own["creator_name"] == "Someone Else" and own["attribution_from"] == "the attribution option"
+    assert own["attribution_file"] == str((tmp_path / "own.toml").resolve())
+    assert "attribution_file" not in api.to_xarray(case_path, attribution=stated).attrs  # no file, none named
+    # a corrected HDF5 file holds no attribution: the variable is not read
+    monkeypatch.setenv("ADCPDYN_ATTRIBUTION", str(tmp_path / "missing.toml"))
+    assert main(["correct", str(case_path), "--out", str(tmp_path / "c.h5")]) == 0
+    capsys.readouterr()
+    assert main(["export", str(case_path), "--out", str(tmp_path / "bad.nc")]) == 2
+    err = capsys.readouterr().err
+    assert f"ADCPDYN_ATTRIBUTION: {tmp_path / 'missing.toml'}: no such file" in err and err.count("\n") == 1
+    assert not (tmp_path / "bad.nc").exists()
+    (tmp_path / "bad.toml").write_text('creator_email = "nobody"\n')
+    monkeypatch.setenv("ADCPDYN_ATTRIBUTION", str(tmp_path / "bad.toml"))
+    with pytest.raises(ValueError, match=r"^ADCPDYN_ATTRIBUTION: bad.toml: creator_email: expected an e-mail address"):
+        api.to_xarray(case_path)
+    monkeypatch.setenv("ADCPDYN_ATTRIBUTION", "")
+    assert api.to_xarray(case_path).attrs["creator_name"] == "not stated"
