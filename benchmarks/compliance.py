@@ -157,6 +157,27 @@ def print_compliance(res: dict) -> None:
     ])
 
 
+EXPORT_LABELS = {"real RiverPro_test01": "real RiverPro_test01",
+                 "sim river_survey": "simulated river_survey (dates, positions)",
+                 "sim deep_ship": "simulated deep_ship (no dates, no positions)"}
+
+
+def markdown_table(res: dict) -> str:
+    """docs/netcdf.md's table: percent of points, cf:1.8 / acdd:1.3 / ioos:1.2, without and with the example
+    attribution, one row per export and kind (real first, corrected before case)."""
+    def cell(r):
+        return " / ".join(f"{r[s]['percent']:.1f}".replace("100.0", "100") for s in SUITES)
+
+    rows = {(r["export"], r["kind"], r["attribution"]): r for r in res["rows"]}
+    lines = ["| export | no attribution | `--attribution docs/examples/attribution.toml` |", "| --- | --- | --- |"]
+    for export, label in EXPORT_LABELS.items():
+        for kind in ("corrected", "case"):
+            if (export, kind, "plain") in rows:
+                lines.append(f"| {label}, {'corrected (asc)' if kind == 'corrected' else 'case'} | "
+                             f"{cell(rows[export, kind, 'plain'])} | {cell(rows[export, kind, 'attributed'])} |")
+    return "\n".join(lines)
+
+
 def figure_compliance(res: dict, path: Path) -> None:
     import matplotlib
 

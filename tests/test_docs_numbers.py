@@ -34,7 +34,8 @@ def _missing(table: str, page: str, skip=lambda line: False) -> list:
 
 @pytest.mark.parametrize("result, module, page", [("diagnosis_random_walk.json", "diagnosis_real", "docs/diagnosis.md"),
                                                   ("diagnosis-survey.json", "diagnosis_real", "docs/diagnosis.md"),
-                                                  ("navigation.json", "navigation_real", "docs/calibration.md")])
+                                                  ("navigation.json", "navigation_real", "docs/calibration.md"),
+                                                  ("compliance.json", "compliance", "docs/netcdf.md")])
 def test_markdown_tables_of_the_benches_are_in_their_pages(result, module, page):
     import importlib
 
