@@ -34,7 +34,7 @@ PAPER = ("Sun Z., Yao S., Gao N., Zhang K. (2024) An ADCP attitude dynamic error
 METHOD_REFERENCE = PAPER + " (the corrections adcpdyn implements, static (ASC) and dynamic)"
 SIMULATION_REFERENCE = PAPER + " (the echo equations adcpdyn's simulator evaluates: Eqs. 65-70 and 88)"
 GCMD_OCEAN_CURRENTS = "EARTH SCIENCE > OCEANS > OCEAN CIRCULATION > OCEAN CURRENTS"
-GCMD_ADCP = "ADCP > Acoustic Doppler Current Profiler"  # GCMD instrument keyword (Profilers/Sounders > Acoustic Sounders)
+GCMD_ADCP = "ADCP > Acoustic Doppler Current Profiler"  # GCMD instrument keyword (under Acoustic Sounders)
 # the platform category of a vessel-mounted ADCP when the attribution states none: IOOS's "ship" (= SeaVoX L06 30,
 # a surface vessel; the vocabulary IOOS-1.2 recommends); the files do not record the vessel's size
 PLATFORM_CATEGORY, PLATFORM_VOCABULARY = "ship", "https://mmisw.org/ont/ioos/platform"
@@ -145,8 +145,8 @@ def _global_attributes(ds, case, provenance, attribution: Attribution, feature, 
                     "accuracy and precision not determined: the instrument's specification is not in its file. "
                     "See earth_frame, beam_numbering, time_origin_utc."
                     + ("" if attribution.platform else
-                       f" platform: IOOS's category {PLATFORM_CATEGORY!r} for the vessel carrying the ADCP (its size is "
-                       "not recorded; an attribution file states another category)")),
+                       f" platform: IOOS's category {PLATFORM_CATEGORY!r} for the vessel carrying the ADCP (its size "
+                       "is not recorded; an attribution file states another category)")),
     }
     if feature:
         out["featureType"] = feature

@@ -190,7 +190,8 @@ def test_platform_and_instrument_name_their_vocabularies(tmp_path):
     case_path = tmp_path / "river.h5"
     api.simulate("river_survey", seed=2, out=case_path)
     plain = api.to_xarray(case_path)
-    assert (plain.attrs["platform"], plain.attrs["platform_vocabulary"]) == ("ship", "https://mmisw.org/ont/ioos/platform")
+    assert plain.attrs["platform"] == "ship"
+    assert plain.attrs["platform_vocabulary"] == "https://mmisw.org/ont/ioos/platform"
     assert "size is not recorded" in plain.attrs["comment"]
     assert plain.attrs["instrument"] == "ADCP > Acoustic Doppler Current Profiler"
     assert plain.attrs["instrument_vocabulary"] == "GCMD Instrument Keywords"
