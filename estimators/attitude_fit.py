@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.signal import lombscargle
 
 from ..cases.case import Case
 from ..models.motion import AttitudeParams, mode_cs
 from ..solvers.ping_map import PingFunction
+from .statistics.periodogram import lomb_scargle
 
 BIC_MARGIN = 10.0
 DECAY_GRID_1_S = (0.0, 0.03, 0.1, 0.3, 1.0)
@@ -105,7 +105,7 @@ def periodogram_peak(t, x, lo, hi, n_candidates=5) -> float:
     if t.size > PERIODOGRAM_SAMPLES:
         keep = np.unique(np.linspace(0, t.size - 1, PERIODOGRAM_SAMPLES).astype(int))
         t, x = t[keep], x[keep]
-    power = lambda grid: sum(lombscargle(t, x[:, j], grid) for j in range(x.shape[1]))
+    power = lambda grid: lomb_scargle(t, x, grid).sum(axis=1)
     if candidates is None:
         coarse = np.arange(lo, hi, width / 2)
         candidates = coarse[np.argsort(power(coarse))[::-1][:n_candidates]]

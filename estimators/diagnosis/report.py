@@ -13,6 +13,7 @@ from ...cases.atomic import atomic_path
 from ...cases.summary import error_velocity_levels
 from ...text import noise_level_text
 from ..calibration.result import jsonable
+from ..statistics.periodogram import lomb_scargle
 from .model import noise_key
 
 
@@ -211,9 +212,7 @@ def spectrum_hz(t: np.ndarray, z: np.ndarray, f_max_hz: float):
         return None
     n = int(np.clip(8 * span * (f_hi - f_lo), 200, 20000))  # 8 points per resolution element 1/span
     f = np.linspace(f_lo, f_hi, n)
-    from scipy import signal
-
-    return f, signal.lombscargle(t, z - z.mean(), 2 * np.pi * f)
+    return f, lomb_scargle(t, z - z.mean(), 2 * np.pi * f)
 
 
 def residual_figure(result):

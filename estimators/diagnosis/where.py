@@ -12,9 +12,10 @@ so channels of different sizes compare.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal, stats
+from scipy import stats
 
 from ..attitude_fit import autocorrelation
+from ..statistics.periodogram import lomb_scargle
 
 N_WINDOWS = 6
 LB_LAGS = 10
@@ -23,7 +24,7 @@ LB_LAGS = 10
 def _peak(t: np.ndarray, x: np.ndarray, lo: float, hi: float):
     """(angular frequency in rad/s, fraction of the variance) of the strongest Lomb-Scargle peak."""
     w = np.linspace(lo, hi, 600)
-    p = signal.lombscargle(t, x - x.mean(), w)
+    p = lomb_scargle(t, x - x.mean(), w)
     k = int(np.argmax(p))
     return float(w[k]), float(2 * p[k] / max(len(x) * np.var(x), 1e-300))
 
