@@ -154,34 +154,6 @@ def test_newey_west_recovers_the_long_run_variance_of_an_ar1_mean():
     assert 0.7 < sw.rho[0] < 0.9
 
 
-def test_the_white_floor_holds_in_every_direction_and_keeps_what_the_hac_adds():
-    """at_least_white_matrix: x^T C' x >= max(x^T C x, x^T W x) for every x; C' = C where C >= W already;
-    a 2-D HAC with the white variances on its axes but a direction below white's (what raising each
-    variance alone leaves overconfident) is lifted there to exactly white's."""
-    from adcpdyn.estimators.statistics.hac import at_least_white, at_least_white_matrix
-
-    rng = np.random.default_rng(11)
-    A, B = rng.standard_normal((5, 5)), rng.standard_normal((5, 3))
-    W, C = A @ A.T + 0.1 * np.eye(5), B @ B.T  # C is rank 3: some directions far below white's
-    out = at_least_white_matrix(C, W)
-    x = rng.standard_normal((5, 200))
-    q = lambda M: np.einsum("ij,ik,kj->j", x, M, x)
-    assert np.all(q(out) >= q(W) * (1 - 1e-9)) and np.all(q(out) >= q(C) * (1 - 1e-9))
-    big = C + 2 * W
-    np.testing.assert_allclose(at_least_white_matrix(big, W), big, rtol=1e-12, atol=1e-12)
-    W2 = np.eye(2)
-    C2 = np.array([[1.0, 0.99], [0.99, 1.0]])  # unit variances, but (1, -1) / sqrt 2 has variance 0.01
-    d = np.array([1.0, -1.0]) / np.sqrt(2)
-    assert d @ at_least_white(C2, np.diag(W2)) @ d == pytest.approx(0.01)  # the axes-only floor misses it
-    assert d @ at_least_white_matrix(C2, W2) @ d == pytest.approx(1.0)
-    s = np.array([1.0, 1.0]) / np.sqrt(2)
-    assert s @ at_least_white_matrix(C2, W2) @ s == pytest.approx(1.99)  # the HAC's own excess kept
-    # a direction the white covariance leaves undetermined (zero there) is left as the HAC has it
-    W3 = np.diag([1.0, 0.0])
-    C3 = np.diag([0.25, 4.0])
-    np.testing.assert_allclose(at_least_white_matrix(C3, W3), np.diag([1.0, 4.0]))
-
-
 def test_hat_basis_is_np_interp_of_the_unit_vectors_and_two_knots_per_row():
     """The navigation's interpolation weights, built sparse, equal np.interp of each knot's unit
     vector (held beyond the ends, one knot alone on a knot), in every form the models take."""

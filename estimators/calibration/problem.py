@@ -40,7 +40,7 @@ from ...solvers.cluster import SERIAL, check_address
 from ...solvers.multistart import MultistartResult, SolverOptions, build_solver, expand_problem, multistart
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..formulations import FORMULATIONS
-from ..statistics.hac import at_least_white_matrix, ping_bins, sandwich
+from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..measurement_model import (ANGLE_NAMES, NAVIGATION_CHOICES, ModelSpec, RunSetup, SurveyModel, choose_navigation,
                                  course_offset_rad, default_threads, heading_span, knot_times, ping_knots)
 from ..statistics.normal_equations import group_levels, redundancy
@@ -680,9 +680,8 @@ class CalibrationProblem:
         )
 
     def _shared_covariance(self, J, e, unc, Q) -> tuple[np.ndarray, dict]:
-        """Covariance of the shared unknowns (scaled): HAC, raised where needed so that no combination
-        of them is better determined than under white noise (:func:`.at_least_white_matrix`); and how it
-        was formed."""
+        """Covariance of the shared unknowns (scaled): HAC, inflated where needed to at least
+        the white-noise covariance's diagonal; and how it was formed."""
         cov_Q = unc.cov_columns(Q)
         white = cov_Q[Q]
         info = {"method": self.config.standard_errors}
@@ -691,13 +690,12 @@ class CalibrationProblem:
         sw = sandwich(J, e, cov_Q, self.model.row_run, self.model.row_time,
                       ping_bins([run.case for run in self.runs]), known=self.model.known_rows)
         d_w = np.diag(white)
-        cov = at_least_white_matrix(sw.cov, white)
+        cov = at_least_white(sw.cov, d_w)
         inflation = np.sqrt(np.diag(cov) / np.where(d_w > 0, d_w, np.inf))
         info.update({"lags": sw.lags, "influence_lag1": sw.rho, "time_bins": sw.bins,
                      "inflation_over_white": {self.names[i]: float(f) for i, f in zip(Q, inflation) if np.isfinite(f) and f > 0},
                      "rule": "Newey-West (Bartlett) over each run's ping-interval time bins, Andrews AR(1) bandwidth; "
-                             "every combination of the shared unknowns at least as uncertain as under white noise (the "
-                             "sandwich raised to the white-noise covariance where it falls below it)"})
+                             "each shared unknown's SE is the larger of the sandwich's and the white-noise one"})
         return cov, info
 
     def _bed_estimates(self, x, se_x, cov_Q, Q) -> dict:

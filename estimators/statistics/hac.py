@@ -117,23 +117,3 @@ def at_least_white(cov: np.ndarray, white_var: np.ndarray) -> np.ndarray:
     d = np.diag(cov)
     ratio = np.sqrt(np.where(d > 0, np.maximum(1.0, white_var / np.where(d > 0, d, 1.0)), 1.0))
     return ratio[:, None] * cov * ratio[None, :]
-
-
-def at_least_white_matrix(cov: np.ndarray, white: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
-    """A HAC covariance raised wherever it falls below the white-noise covariance ``white``, in every
-    direction, not only along the axes (:func:`at_least_white`): in the coordinates where ``white`` is
-    the identity, the HAC one's eigenvalues below 1 are lifted to 1 and the others kept, so that no
-    combination of the unknowns is better determined under coloured residuals than under white ones,
-    and what the HAC adds is kept. A one-dimensional floor leaves correlated directions overconfident
-    (the two-stage baseline's lever arms on pool_m0: errors 10x the bound in the observable subspace).
-    Directions ``white`` leaves undetermined (zero variance there) are left as they are."""
-    cov = 0.5 * (cov + cov.T)
-    w, V = np.linalg.eigh(0.5 * (white + white.T))
-    keep = w > rtol * max(float(w.max(initial=0.0)), 1e-300)
-    if not keep.any():
-        return cov
-    S = V[:, keep] * np.sqrt(w[keep])  # white = S S^T on its range
-    S_pinv = (V[:, keep] / np.sqrt(w[keep])).T
-    a, U = np.linalg.eigh(S_pinv @ cov @ S_pinv.T)  # the HAC covariance in white-whitened coordinates
-    lift = S @ U
-    return cov + (lift * np.maximum(1.0 - a, 0.0)) @ lift.T
