@@ -293,6 +293,18 @@ class RowJacobian:
         part by a dense product, the knots' by sparse ones (knot and shared columns are disjoint)."""
         return self.gram_and_gradient(z, w)[0]
 
+    def _unknotted(self, index: int, w: np.ndarray, ds_dz) -> tuple:
+        """A block without knots as :meth:`gram_and_gradient` and :meth:`matmul` take it: (k outputs, n rows,
+        its slice of J's rows, its shared columns sc, the weights w times the outputs' signs as (n, k), and
+        ds/dz of its share of s on columns sc, dense)."""
+        b = self.blocks[index]
+        k, n = b.fun.size1_out(0), b.data.shape[1]
+        rows = slice(b.offset, b.offset + k * n)
+        sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
+        a = (w[rows].reshape(k, n) * sign[:, None]).T  # (n, k): row j's output i weighted and signed
+        sc = self._cols[index]
+        return k, n, rows, sc, a, ds_dz[self._index[index]][:, sc].toarray()
+
     def gram_and_gradient(self, z, w, e: np.ndarray | None = None) -> tuple:
         """J^T J as :meth:`gram` and, with the residuals ``e`` (n_rows,), the gradient J^T e of
         0.5 |e|^2 from the same pass over the blocks (None without ``e``).
@@ -304,16 +316,12 @@ class RowJacobian:
         w = np.asarray(w, dtype=float).ravel()
         s, ds_dz = self._shared_at(z)
         knotted = []
-        for index, b in enumerate(self.blocks):
+        for index in range(len(self.blocks)):
             if self._has_knots(index):  # the J path below, which builds the knot entries once
                 knotted.append(index)
                 continue
-            k, n = b.fun.size1_out(0), b.data.shape[1]
-            sc = self._cols[index]
+            k, n, rows, sc, a, ds_b = self._unknotted(index, w, ds_dz)
             parts, (_, js) = self._prepare(index, np.zeros((n, 3)), s[self._index[index]])
-            sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
-            rows = slice(b.offset, b.offset + k * n)
-            a = (w[rows].reshape(k, n) * sign[:, None]).T  # (n, k): row j's output i weighted and signed
             ea = None if e is None else np.asarray(e[rows]).reshape(k, n).T
             ns = js.shape[2]
 
@@ -330,7 +338,6 @@ class RowJacobian:
 
             sums = self._map(chunk, range(len(parts)))
             M, g = sum(m for m, _ in sums), sum(v for _, v in sums)
-            ds_b = ds_dz[self._index[index]][:, sc].toarray()
             G[np.ix_(sc, sc)] += ds_b.T @ M @ ds_b
             if grad is not None:
                 grad[sc] += ds_b.T @ g
@@ -351,24 +358,20 @@ class RowJacobian:
         w = np.asarray(w, dtype=float).ravel()
         s, ds_dz = self._shared_at(z)
         knotted = []
-        for index, b in enumerate(self.blocks):
+        for index in range(len(self.blocks)):
             if self._has_knots(index):
                 knotted.append(index)
                 continue
-            k, n = b.fun.size1_out(0), b.data.shape[1]
-            sc = self._cols[index]
+            k, n, rows, sc, a, ds_b = self._unknotted(index, w, ds_dz)
             _, js = self._evaluate(index, np.zeros((n, 3)), s[self._index[index]])
-            sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
-            B = ds_dz[self._index[index]][:, sc].toarray() @ M2[sc]  # (ns, q)
-            a = (w[b.offset:b.offset + k * n].reshape(k, n) * sign[:, None]).T  # (n, k)
-            jb = (js.reshape(n * k, -1) @ B).reshape(n, k, -1)  # one product; rows ping-major
+            jb = (js.reshape(n * k, -1) @ (ds_b @ M2[sc])).reshape(n, k, -1)  # one product; rows ping-major
             jb *= a[:, :, None]
-            out[b.offset:b.offset + k * n].reshape(k, n, -1)[...] = jb.transpose(1, 0, 2)  # output-major, as J's rows
+            out[rows].reshape(k, n, -1)[...] = jb.transpose(1, 0, 2)  # output-major, as J's rows
         for r, sc, shared, knot_part in self._parts(z, w, only=knotted):
-            rows = out[r[0]:r[-1] + 1]
-            rows[...] = shared @ M2[sc]
+            part = out[r[0]:r[-1] + 1]
+            part[...] = shared @ M2[sc]
             if knot_part is not None:
-                rows += knot_part @ M2
+                part += knot_part @ M2
         return out.reshape((self.n_rows,) + M.shape[1:])
 
     def at(self, z, w) -> "JacobianAt":
