@@ -42,12 +42,17 @@ def progress_enabled() -> bool:
     return enabled(_LIVE_FD if _LIVE_FD is not None else 2)
 
 
+from .text import noise_levels_line, prose  # noqa: E402  (noise levels with units; lines wrapped to the tables' width)
+
+
 def warn(text: str) -> None:
-    """A warning line on stderr (stdout keeps the results a script reads)."""
-    print(f"warning: {text}", file=sys.stderr)
+    """A warning on stderr (stdout keeps the results a script reads), wrapped to the tables' width."""
+    print(prose(f"warning: {text}"), file=sys.stderr)
 
 
-from .text import noise_levels_line  # noqa: E402  (the calibration's noise levels, with units)
+def say(line: str) -> None:
+    """A line of results on stdout, wrapped to the tables' width (continuation lines indented)."""
+    print(prose(line))
 
 
 class _Progress:
@@ -410,18 +415,21 @@ def _print_calibration(result, title: str) -> None:
     """What a calibration found, with standard errors, in the field's words."""
     ms = result.multistart
     deg = np.rad2deg
-    print(f"{title}: {result.config.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
-          f"{result.jacobian} Jacobian, beams' attitude from the {result.attitude_source}")
-    print(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
-          f"{result.max_constraint_violation:.2e}; {ms.time_s:.2f} s")
+    say(f"{title}: {result.config.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
+        f"{result.jacobian} Jacobian, beams' attitude from the {result.attitude_source}")
+    say(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
+        f"{result.max_constraint_violation:.2e}; solver time {ms.time_s:.2f} s summed over the starts")
     if result.instrument is not None:
-        print(f"instrument: {result.instrument.label()}")
+        say(f"instrument: {result.instrument.label()}")
     label = "head-frame lever arms (m)" if result.attitude_frame == "transducer" else "radius vectors, body frame (m)"
-    print(label + "  [value +- se]")
-    for i in range(4):
+    if not np.isfinite(result.lever_arms_sensor_se_m).any():
+        say(f"{label}: not determined (the warnings say why)")
+    else:
+        say(label + "  [value +- se]")
+    for i in range(4 if np.isfinite(result.lever_arms_sensor_se_m).any() else 0):
         cells = "  ".join(f"{v:+.4f} +- {s:.4f}" if np.isfinite(s) else "  (not determined)  "
                           for v, s in zip(result.lever_arms_sensor_m[i], result.lever_arms_sensor_se_m[i]))
-        print(f"  r{i + 1}: {cells}")
+        say(f"  r{i + 1}: {cells}")
     if_moves = {c["pair"][0]: c for c in result.confounded if "se_if_bed_moves_rad" in c}
 
     def bed_fixed(name: str) -> str:  # the moving-bed test could not decide: the pair's other reading, in the headline
@@ -432,40 +440,39 @@ def _print_calibration(result, title: str) -> None:
     yaw = bed_fixed("installation_yaw")
 
     if np.isfinite(result.heading_misalignment_se_rad):
-        print(f"heading misalignment against the reference (deg): {deg(result.heading_misalignment_rad):+.4f} "
-              f"+- {deg(result.heading_misalignment_se_rad):.4f}{bed_fixed('heading_misalignment')} (true heading = "
-              f"sensor heading + misalignment; head sensor: written as the installation yaw, installation pitch and roll "
-              f"not determined)")
+        say(f"heading misalignment against the reference (deg): {deg(result.heading_misalignment_rad):+.4f} "
+            f"+- {deg(result.heading_misalignment_se_rad):.4f}{bed_fixed('heading_misalignment')} (true heading = "
+            f"sensor heading + misalignment; head sensor: written as the installation yaw, installation pitch and roll "
+            f"not determined)")
     if result.compass_deviation_rad is not None:
         b, c = deg(result.compass_deviation_rad)
         sb, sc = deg(result.compass_deviation_se_rad)
-        print(f"compass deviation (deg): {b:+.3f} +- {sb:.3f} sin(heading) {c:+.3f} +- {sc:.3f} cos(heading)")
+        say(f"compass deviation (deg): {b:+.3f} +- {sb:.3f} sin(heading) {c:+.3f} +- {sc:.3f} cos(heading)")
     if result.magnetic_declination_rad is not None:
         err = result.compass_error_rad
-        print(f"magnetic declination (deg): {deg(result.magnetic_declination_rad):+.2f} ({result.magnetic_declination_note})"
-              + ("" if err is None else f"; compass error = misalignment - declination: {deg(err):+.2f} deg"))
+        say(f"magnetic declination (deg): {deg(result.magnetic_declination_rad):+.2f} ({result.magnetic_declination_note})"
+            + ("" if err is None else f"; compass error = misalignment - declination: {deg(err):+.2f} deg"))
     if result.installation_determined:
-        print("installation yaw/pitch/roll (deg): " + ", ".join(
+        say("installation yaw/pitch/roll (deg): " + ", ".join(
             f"{deg(v):+.4f} +- {deg(s):.4f}" for v, s in zip(result.installation_ypr_rad, result.installation_ypr_se_rad))
             + (f" (yaw{yaw})" if yaw else ""))
     if result.moving_bed != "off":
         fmt = lambda v, s: ("not determined" if v is None or not np.all(np.isfinite(s)) else
                             f"north {v[0]:+.4f} +- {s[0]:.4f}, east {v[1]:+.4f} +- {s[1]:.4f}")
-        print(f"moving bed ({result.moving_bed}, m/s): {fmt(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s)}")
+        say(f"moving bed ({result.moving_bed}, m/s): {fmt(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s)}")
         if len(result.runs) > 1:
             for run in result.runs:
-                print(f"  {run.case}: {fmt(run.moving_bed_velocity_m_s, run.moving_bed_velocity_se_m_s)}")
+                say(f"  {run.case}: {fmt(run.moving_bed_velocity_m_s, run.moving_bed_velocity_se_m_s)}")
     test = result.moving_bed_test
     if test:
-        share = "" if test["percent_of_flow"] is None else f", {test['percent_of_flow']:.1f} % of the mean flow"
-        print(f"moving-bed test: {test['decision']} ({test['reason']}{share}; threshold {test['threshold_m_s']:.3f} m/s)"
-              + ("; solved again without a bed" if test["decision"] == "fixed" else ""))
+        say(f"moving-bed test: {test['decision']} ({test['reason']})"
+            + ("; solved again without a bed" if test["decision"] == "fixed" else ""))
     inflation = result.standard_errors.get("inflation_over_white", {})
     if inflation:
         worst = max(inflation, key=inflation.get)
-        print(f"standard errors: {result.standard_errors['method']} (Newey-West lags {result.standard_errors['lags']}); "
-              f"largest inflation over white noise x{inflation[worst]:.2f} ({worst})")
-    print(noise_levels_line(result.noise_sigma))
+        say(f"standard errors: {result.standard_errors['method']} (Newey-West lags {result.standard_errors['lags']}); "
+            f"largest inflation over white noise x{inflation[worst]:.2f} ({worst})")
+    say(noise_levels_line(result.noise_sigma))
     for w in result.warnings:
         warn(f"{w}")
 
@@ -551,7 +558,8 @@ def cmd_demo(args) -> int:
                                                               seed=args.seed)).solve()
     calib.to_json(out / "calibration.json")
     ms = calib.multistart
-    print(f"\njoint calibration ({calib.formulation}): {ms.message}, {ms.time_s:.2f} s solver time")
+    print()
+    say(f"joint calibration ({calib.formulation}): {ms.message}; solver time {ms.time_s:.2f} s summed over the starts")
     label = "head" if calib.attitude_frame == "transducer" else "body"
     for i in range(4):
         print(f"  r{i + 1} ({label} frame, m): " + "  ".join(
@@ -591,8 +599,9 @@ def cmd_demo(args) -> int:
     with atomic_path(out / "metrics.json") as tmp, open(tmp, "w") as fh:
         json.dump(summary, fh, indent=2)
     fmt = args.format
-    print(f"\nsaved in {out}/: calibration.json, attitude_fit.{fmt}, radius_vectors.{fmt}, "
-          + ", ".join(f"{n}_velocity.{fmt}" for n in args.scenario) + ", metrics.json, corrected and case files")
+    print()
+    say(f"saved in {out}/: calibration.json, attitude_fit.{fmt}, radius_vectors.{fmt}, "
+        + ", ".join(f"{n}_velocity.{fmt}" for n in args.scenario) + ", metrics.json, corrected and case files")
     return 0
 
 

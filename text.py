@@ -1,6 +1,6 @@
 """Terminal text a hydrographer reads at a glance: fixed-width tables no wider than
 :data:`TABLE_WIDTH` characters, a unit under every number column, the abbreviations explained
-under the table, and noise levels with their units.
+under the table, noise levels with their units, and prose lines wrapped to the same width.
 
 A table too wide for :data:`TABLE_WIDTH` is printed as blocks of columns, each block
 repeating the first column, rather than wrapped by the terminal.
@@ -108,6 +108,15 @@ def text_table(rows: dict, columns: list, first: str = "method", legend: str = "
     if legend:
         out += textwrap.wrap(legend, width=width, subsequent_indent="  ")
     return "\n".join(line.rstrip() for line in out)
+
+
+def prose(line: str, width: int = TABLE_WIDTH, indent: str = "    ") -> str:
+    """A line of words wrapped to ``width`` characters, its continuation lines indented, words
+    (numbers, names, paths) never split: a headline's value stays on its first line."""
+    if len(line) <= width:
+        return line
+    return "\n".join(textwrap.wrap(line, width=width, subsequent_indent=indent, break_long_words=False,
+                                    break_on_hyphens=False))
 
 
 def noise_level_text(key: str, value: float) -> str:

@@ -6,6 +6,7 @@ import numpy as np
 from scipy.signal import lombscargle
 
 from ..models.janus import error_velocity
+from ..text import prose
 from .case import Case
 
 
@@ -43,6 +44,9 @@ def error_velocity_levels(radial_m_s, beam_dirs) -> tuple[float, float, int]:
 def _intervals(t):
     dt = np.diff(t)
     return f"{dt.mean():.3f} s mean interval ({dt.min():.3f}-{dt.max():.3f} s)" if dt.size else "single sample"
+
+
+LABEL_WIDTH = 13  # "instrument   ": a wrapped line continues under the values
 
 
 def summarise(case: Case) -> str:
@@ -110,4 +114,4 @@ def summarise(case: Case) -> str:
                              ("truth", case.truth is not None)) if present
     ]
     lines.append(f"groups       {', '.join(groups)}")
-    return "\n".join(lines)
+    return "\n".join(prose(line, indent=" " * LABEL_WIDTH) for line in lines)

@@ -114,6 +114,8 @@ def test_demo_and_compare_tables_fit_and_warnings_go_to_stderr(tmp_path, capfd, 
     out, err = capfd.readouterr()
     table = _table(out, "method", 6)
     assert max(len(ln) for ln in table) <= TABLE_WIDTH and table[-1].startswith("truth "), table
+    long = [ln for ln in (out + err).splitlines() if len(ln) > TABLE_WIDTH]
+    assert not long, long  # prose (the case summary, the solver's line, warnings) wraps as the tables do
     assert "warning:" not in out and "warning: " in err  # the head-frame attitude's warning
     assert "multistart" not in err and "\r" not in err
     assert main(["compare", str(out_dir / "pool_m1.h5"), "--calibration", str(out_dir / "calibration.json")]) == 0
@@ -345,3 +347,36 @@ def test_weak_directions_are_said_in_words():
         "heading misalignment and moving bed north together")
     assert _describe(np.array([0.99, 0.1, 0.0, 0.0]), names, {}).startswith("compass deviation cos alone")
     assert _describe(np.array([0.5, 0.5, 0.5, 0.5]), names, {}).startswith("a mix of ")
+
+
+def test_prose_wraps_to_the_table_width_without_splitting_numbers_or_names():
+    from adcpdyn.text import prose
+
+    line = "heading misalignment against the reference (deg): +19.8767 +- 0.7858 (true heading = " + "x " * 40
+    lines = prose(line).splitlines()
+    assert lines[0].startswith("heading misalignment against the reference (deg): +19.8767 +- 0.7858")
+    assert all(len(ln) <= TABLE_WIDTH for ln in lines) and all(ln.startswith("    ") for ln in lines[1:])
+    assert prose("short  line  ") == "short  line  "  # a line that fits is left as it is
+    path = "/a/" + "b" * 120
+    assert path in prose(f"wrote {path}")  # a word longer than the width stays whole
+
+
+def test_weak_directions_in_the_boats_own_velocity_are_summarised_in_one_phrase():
+    """Thirty weak directions among the per-knot velocities are one phrase (runs, components), not
+    thirty coefficient vectors; the platform's own weak direction is still named in words."""
+    import numpy as np
+
+    from adcpdyn.estimators.statistics.uncertainty import uncertainty
+
+    names = [f"run2/V{k}_{a}" for k in range(10) for a in "xyz"] + ["heading_misalignment", "moving_bed_north"]
+    n = len(names)
+    J = 1e3 * np.eye(n)  # in scaled unknowns: SE 1e-3 of a scale, well determined
+    J[np.arange(2, 30, 3), np.arange(2, 30, 3)] = 1.0  # the vertical velocities barely seen (SE a whole scale)
+    J[-2:, -2:] = [[1e3, 1e3], [1e3, 1e3 + 5.0]]  # misalignment and bed barely told apart
+    scale = np.ones(n)
+    nav = np.array([nm.startswith("run2/V") for nm in names])
+    unc = uncertainty(J, None, names, scale, {"navigation": nav})
+    warn = next(w for w in unc.warnings if "weakly determined" in w)
+    assert "10 in the boat's own velocity between its samples (run2; vertical component)" in warn, warn
+    assert "heading misalignment" in warn and "run2/V" not in warn and "+0." not in warn, warn
+    assert all("vector" in u and "words" in u for u in unc.unobservable)

@@ -52,12 +52,15 @@ def moving_bed_test(velocity_m_s, se_m_s, confounded: bool, flow_m_s: float | No
     p = float(stats.chi2.sf(chi2, 2))
     out.update(speed_m_s=speed, speed_se_m_s=speed_se, chi2=chi2, p_value=p,
                percent_of_flow=100 * speed / flow_m_s if flow_m_s else None)
-    flow = f"{FLOW_SHARE:.0%} of the mean flow {flow_m_s:.2f} m/s and " if flow_m_s else ""
+    share = f" ({100 * speed / flow_m_s:.1f} % of the mean flow {flow_m_s:.2f} m/s)" if flow_m_s else ""
+    rule = (f"the larger of {MIN_SPEED_M_S} m/s and {100 * FLOW_SHARE:g} % of the mean flow" if flow_m_s else
+            f"{MIN_SPEED_M_S} m/s; no water profile gives the mean flow")
     if p < SIGNIFICANCE and speed > threshold:
-        return {**out, "decision": "moving", "reason": f"{speed:.3f} +- {speed_se:.3f} m/s, significant (p = {p:.1g}) "
-                                                       f"and above {flow}{MIN_SPEED_M_S} m/s"}
+        return {**out, "decision": "moving", "reason": f"{speed:.3f} +- {speed_se:.3f} m/s{share}: significant "
+                                                       f"(p = {p:.1g}) and above the threshold {threshold:.3f} m/s ({rule})"}
     if confounded:
         return {**out, "decision": "undetermined", "reason": "the bed and a constant heading error turn the bottom track "
                                                              "alike on these courses"}
-    why = "not significant" if p >= SIGNIFICANCE else f"below {flow}{MIN_SPEED_M_S} m/s"
-    return {**out, "decision": "fixed", "reason": f"{speed:.3f} +- {speed_se:.3f} m/s: {why}"}
+    why = (f"not significant (p = {p:.2g})" if p >= SIGNIFICANCE else
+           f"below the threshold {threshold:.3f} m/s ({rule})")
+    return {**out, "decision": "fixed", "reason": f"{speed:.3f} +- {speed_se:.3f} m/s{share}: {why}"}

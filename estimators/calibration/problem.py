@@ -549,7 +549,8 @@ class CalibrationProblem:
         r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))
-        context = {"beam_dirs_sensor": model.beam_dirs_t @ Lst.T, "frame": self.frame}
+        context = {"beam_dirs_sensor": model.beam_dirs_t @ Lst.T, "frame": self.frame,
+                   "navigation": model.velocity_columns()}
         if self.walk:  # a velocity per ping: eliminated first, nothing of size unknowns x unknowns formed
             unc = uncertainty_eliminating(J, Jg[eq] if eq.any() else None, self.names, self.scale,
                                           model.velocity_columns(), context)
@@ -784,8 +785,9 @@ class CalibrationProblem:
         warn = [] if spread <= DECLINATION_SPAN_RAD else [
             f"the runs' magnetic declinations span {np.rad2deg(spread):.1f} deg (more than a survey's "
             f"{np.rad2deg(DECLINATION_SPAN_RAD):g} deg): runs of different sites or years calibrated as one"]
-        note = found[0][1] if len(values) == 1 else (f"IGRF-14 over {len(values)} runs: {np.rad2deg(mean):+.2f} deg "
-                                                     f"(runs {np.rad2deg(min(values)):+.2f} to {np.rad2deg(max(values)):+.2f})")
+        lo, hi = np.rad2deg(min(values)), np.rad2deg(max(values))
+        note = found[0][1] if len(values) == 1 else (
+            f"IGRF-14, the mean of {len(values)} runs" + (f": {lo:+.2f} to {hi:+.2f} deg" if f"{lo:.2f}" != f"{hi:.2f}" else ""))
         return mean, note, warn
 
     def _run_results(self, x, e, bed) -> list:

@@ -53,38 +53,42 @@ class Uncertainty:
 
 
 def _describe(vec_x: np.ndarray, names: list, context: dict) -> str:
-    """Words for one unobservable direction (given in unscaled variables, unit norm)."""
+    """Words for one unobservable direction (given in unscaled variables, unit norm), its largest
+    coefficients in brackets."""
     v = vec_x / np.linalg.norm(vec_x)
     big = np.argsort(np.abs(v))[::-1]
-    terms = [f"{v[i]:+.2f} {names[i]}" for i in big[:4] if abs(v[i]) > 0.05]
-    text = " ".join(terms)
+    text = " ".join(f"{v[i]:+.2f} {names[i]}" for i in big[:4] if abs(v[i]) > 0.05)
+    return f"{_words(v, names, context, big)} ({text})"
+
+
+def _words(v: np.ndarray, names: list, context: dict, big: np.ndarray) -> str:
+    """A direction (unit vector ``v``, ``big`` its indices by size) in the field's words."""
     idx = {n: i for i, n in enumerate(names)}
     lever = np.array([idx[n] for n in names if n.startswith("r") and n[1:2].isdigit()])
     weight_lever = np.sum(v[lever] ** 2) if lever.size else 0.0
     if lever.size == 12 and weight_lever > 0.95:
         r = v[lever].reshape(4, 3)
-        norms = np.linalg.norm(r, axis=1)
         beams = context.get("beam_dirs_sensor")
         if beams is not None:
             along = np.sum(r * beams, axis=1)  # each transducer's move along its own beam
             if np.sum((r - along[:, None] * beams) ** 2) < 0.05 * weight_lever:
                 who = [str(k + 1) for k in np.flatnonzero(np.abs(along) > 0.2 * np.abs(along).max())]
                 if len(who) == 4 and np.all(np.sign(along) == np.sign(along[0])):
-                    return f"all four transducers sliding along their own beams together ('breathing') ({text})"
-                return f"transducer(s) {', '.join(who)} sliding along their own beams ({text})"
+                    return "all four transducers sliding along their own beams together ('breathing')"
+                return f"transducer(s) {', '.join(who)} sliding along their own beams"
         mean = r.mean(axis=0)
         if np.linalg.norm(mean) * 2 > 0.95 and np.allclose(r, mean, atol=0.1):
             axis = int(np.argmax(np.abs(mean)))
-            return f"the whole head shifted along {AXIS_WORDS[context.get('frame', 'vessel')][axis]} ({text})"
+            return f"the whole head shifted along {AXIS_WORDS[context.get('frame', 'vessel')][axis]}"
     p_idx = [idx[n] for n in ("P_x", "P_y", "P_z") if n in idx]
     if p_idx and np.sum(v[p_idx] ** 2) > 0.95:
         axis = int(np.argmax(np.abs(v[p_idx])))
-        return f"the head centre P along {AXIS_WORDS[context.get('frame', 'vessel')][axis]} ({text})"
+        return f"the head centre P along {AXIS_WORDS[context.get('frame', 'vessel')][axis]}"
     if any(n.startswith("installation") for n in (names[i] for i in big[:1])):
-        return f"installation angle {names[big[0]].split('_')[1]} ({text})"
+        return f"installation angle {names[big[0]].split('_')[1]}"
     if all(names[i].startswith(("roll", "pitch", "yaw")) for i in big[:2]):
-        return f"attitude-model parameters ({text})"
-    return f"{_in_words(v, names, big)} ({text})"
+        return "attitude-model parameters"
+    return _in_words(v, names, big)
 
 
 def _in_words(v: np.ndarray, names: list, big: np.ndarray) -> str:
@@ -153,14 +157,44 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
             vec_x = d * scale
             unit = vec_x / np.linalg.norm(vec_x)
             unobs.append({"kind": kind, "description": _describe(vec_x, names, context),
+                          "words": _words(unit, names, context, np.argsort(np.abs(unit))[::-1]),
                           "se_along": float(s_d * np.linalg.norm(vec_x)) if np.isfinite(s_d) else None,
                           "vector": {names[i]: float(unit[i]) for i in np.flatnonzero(np.abs(unit) > 1e-3)}})
+    navigation = context.get("navigation")
     for kind, label in (("unobservable", "not determined by the data"), ("weak", "only weakly determined")):
-        items = [u["description"] for u in unobs if u["kind"] == kind]
-        if items:
-            warns.append(f"{len(items)} direction(s) of the unknowns {label}: " + "; ".join(items[:6])
-                         + ("; ..." if len(items) > 6 else ""))
+        found = [u for u in unobs if u["kind"] == kind]
+        boat = [u for u in found if navigation is not None and _on_navigation(u["vector"], names, navigation)]
+        said = [u["words"] for u in found if not any(u is b for b in boat)]
+        items = ([_navigation_words(boat)] if boat else []) + [
+            w + (f" ({said.count(w)} directions)" if said.count(w) > 1 else "") for w in dict.fromkeys(said)]
+        if found:
+            warns.append(f"{len(found)} direction(s) of the unknowns {label} (their coefficients in the "
+                         "result's `unobservable` list): " + "; ".join(items[:6]) + ("; ..." if len(items) > 6 else ""))
     return Uncertainty(cov_z, se, lam, null_z, unobs, warns)
+
+
+NAVIGATION_SHARE = 0.9  # a direction this much (squared, unit vector) on the boat's own velocity unknowns
+
+
+def _on_navigation(vector: dict, names: list, navigation: np.ndarray) -> bool:
+    idx = {n: i for i, n in enumerate(names)}
+    return sum(w * w for n, w in vector.items() if navigation[idx[n]]) >= NAVIGATION_SHARE
+
+
+def _navigation_words(directions: list) -> str:
+    """Directions in the boat's own velocity (its knots or pings) summarised in one phrase: which
+    runs and components, not a coefficient vector each (they are in the result's JSON)."""
+    runs, axes = set(), set()
+    for u in directions:
+        for n, w in u["vector"].items():
+            if w * w >= 0.05:
+                run, _, var = n.rpartition("/")
+                runs.add(run or "the run")
+                axes.add({"x": "north", "y": "east", "z": "vertical"}.get(var[-1], var[-1]))
+    order = [a for a in ("north", "east", "vertical") if a in axes]
+    return (f"{len(directions)} in the boat's own velocity between its samples ({', '.join(sorted(runs))}; "
+            f"{', '.join(order)} component{'s' if len(order) > 1 else ''}), the base the calibration fits "
+            "under the platform's unknowns")
 
 
 def uncertainty_eliminating(J, A: np.ndarray | None, names: list, scale: np.ndarray, local: np.ndarray,
