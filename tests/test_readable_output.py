@@ -380,3 +380,19 @@ def test_weak_directions_in_the_boats_own_velocity_are_summarised_in_one_phrase(
     assert "10 in the boat's own velocity between its samples (run2; vertical component)" in warn, warn
     assert "heading misalignment" in warn and "run2/V" not in warn and "+0." not in warn, warn
     assert all("vector" in u and "words" in u for u in unc.unobservable)
+
+def test_a_frequency_above_the_pings_nyquist_is_said_to_be_an_alias():
+    """Heave fitted at 1.65 Hz from pings every 0.67 s (Nyquist 0.746 Hz) is the same samples as
+    0.159 Hz: the report says so; below the Nyquist, or without one, nothing is added."""
+    import numpy as np
+
+    from adcpdyn.estimators.diagnosis.report import alias_note, parameters_text
+
+    note = alias_note(2 * np.pi * 1.652, 0.746)
+    assert "1.65 Hz: above the pings' Nyquist 0.746 Hz" in note and "alias of 0.16 Hz" in note, note
+    t = np.arange(40) * (0.5 / 0.746)  # the pings really do see the two frequencies alike
+    assert np.allclose(np.cos(2 * np.pi * 1.652 * t), np.cos(2 * np.pi * 0.16 * t), atol=0.02)
+    assert alias_note(2 * np.pi * 0.5, 0.746) == "" and alias_note(2 * np.pi * 1.652, None) == ""
+    score = {"effect": "heave", "params": {"heave.omega_rad_s": 2 * np.pi * 1.652, "heave.cos_m": 0.001},
+             "params_se": {"heave.omega_rad_s": 0.005, "heave.cos_m": 0.0004}}
+    assert "Nyquist" in parameters_text(score, 0.746) and "Nyquist" not in parameters_text(score)

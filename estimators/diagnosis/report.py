@@ -40,8 +40,9 @@ def table(result, n_where: int = 6) -> str:
     lines += ["", "## Which effect", "",
               "| effect | delta LL | delta BIC | p-value | gap after | shrink | significant | parameters (± SE) | solver |",
               "|---|---:|---:|---:|---:|---:|:---:|---|---|"]
+    nyquist = result_nyquist_hz(r)
     for s in r.ranking:
-        params = parameters_text(s)
+        params = parameters_text(s, nyquist)
         if len(params) > 160:
             params = params[:157] + "..."
         p = "n/a (no unknowns)" if not np.isfinite(s["p_value"]) else f"{s['p_value']:.2g}"
@@ -92,10 +93,39 @@ def parameter_text(name: str, value: float, se: float | None, at_bound: bool = F
     return f"{short} {scale * value:+.4g}{u} {spread}"
 
 
-def parameters_text(score: dict) -> str:
-    """An effect's fitted unknowns (:func:`parameter_text`), comma separated."""
+PING_SAMPLED_FREQUENCIES = ("heave.omega_rad_s", "surge.omega_rad_s")  # seen only at the pings (and fixes)
+
+
+def alias_note(omega_rad_s: float, nyquist_hz: float) -> str:
+    """Words for a fitted frequency above the pings' Nyquist: the pings see it as its alias, so
+    the fit cannot tell the one from the other (nor the amplitude's scale with it); else ''."""
+    f = abs(omega_rad_s) / (2 * np.pi)
+    if not np.isfinite(f) or not nyquist_hz or f <= nyquist_hz:
+        return ""
+    rate = 2.0 * nyquist_hz
+    alias = abs(f - rate * np.round(f / rate))
+    return (f" ({f:.3g} Hz: above the pings' Nyquist {nyquist_hz:.3g} Hz, to the pings an alias of {alias:.3g} Hz, "
+            "which fits nearly alike)")
+
+
+def parameters_text(score: dict, nyquist_hz: float | None = None) -> str:
+    """An effect's fitted unknowns (:func:`parameter_text`), comma separated; a frequency the pings
+    sample above their Nyquist ``nyquist_hz`` says so (:func:`alias_note`)."""
     bound = score.get("at_bound", [])
-    return ", ".join(parameter_text(n, v, score["params_se"].get(n), n in bound) for n, v in score["params"].items())
+    out = []
+    for n, v in score["params"].items():
+        text = parameter_text(n, v, score["params_se"].get(n), n in bound)
+        if nyquist_hz and n in PING_SAMPLED_FREQUENCIES:
+            text += alias_note(v, nyquist_hz)
+        out.append(text)
+    return ", ".join(out)
+
+
+def result_nyquist_hz(result) -> float | None:
+    """The lowest ping Nyquist frequency of a diagnosis's runs (None when its fits are not kept)."""
+    fits = getattr(result, "fits", None) or {}
+    runs = fits["base"][0].base.runs if "base" in fits else []
+    return min((ping_nyquist_hz(run.case) for run in runs), default=None)
 
 
 EFFECT_LEGEND = ("dLL, dBIC: change of log-likelihood and BIC against the base (dBIC < 0: better); p: p-value; "
@@ -142,8 +172,10 @@ def terminal_text(result, n_where: int = 6, width: int | None = None) -> str:
     if rows:
         lines.append(text_table(rows, columns, first="effect", legend=EFFECT_LEGEND, width=width, cell=cell))
         lines.append("Fitted unknowns (± SE) and the solver's status:")
+        nyquist = result_nyquist_hz(r)
         for s in r.ranking:
-            lines += textwrap.wrap(f"  {s['effect']}: {parameters_text(s) or 'no unknowns'}; {s['status']}", width=width,
+            lines += textwrap.wrap(f"  {s['effect']}: {parameters_text(s, nyquist) or 'no unknowns'}; {s['status']}",
+                                   width=width,
                                    subsequent_indent="      ")
     if r.base.get("skipped_effects"):
         lines += para("Not tried: " + "; ".join(f"{k} ({v})" for k, v in r.base["skipped_effects"].items()))
