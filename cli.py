@@ -50,9 +50,9 @@ def warn(text: str) -> None:
     print(prose(f"warning: {text}"), file=sys.stderr)
 
 
-def say(line: str) -> None:
+def say(line: str, indent: str = "    ") -> None:
     """A line of results on stdout, wrapped to the tables' width (continuation lines indented)."""
-    print(prose(line))
+    print(prose(line, indent=indent))
 
 
 class _Progress:
@@ -102,7 +102,7 @@ def cmd_scenarios(args) -> int:
     surveys = set(survey_names())
     for name, sc in load_scenarios().items():
         label = " [survey: simulate --runs K for K transects]" if name in surveys else ""
-        print(f"{name:<20} {sc.platform.name:<14} {sc.run.description}{label}")
+        say(f"{name:<20} {sc.platform.name:<14} {sc.run.description}{label}", indent=" " * 36)
     return 0
 
 
@@ -183,25 +183,25 @@ def cmd_import(args) -> int:
         case, attrs = resalted(case, attrs, args.salinity_psu)
     write_imported(case, attrs, args.out, source=path)
     prov = attrs["/provenance"]
-    print(f"wrote {args.out}: {case.pings.n} pings over {case.pings.time_s[-1]:.1f} s, BT from "
-          f"{prov['coordinate_system_found']} coordinates, attitude frame {case.attitude.frame}, "
-          f"{int(np.sum(np.all(np.isfinite(case.pings.bt_radial_m_s), axis=1)))} pings with 4 valid beams")
+    say(f"wrote {args.out}: {case.pings.n} pings over {case.pings.time_s[-1]:.1f} s, BT from "
+        f"{prov['coordinate_system_found']} coordinates, attitude frame {case.attitude.frame}, "
+        f"{int(np.sum(np.all(np.isfinite(case.pings.bt_radial_m_s), axis=1)))} pings with 4 valid beams")
     if "clock_offset_s" in prov:
-        print(f"GNSS: {prov['gnss']}; clock offset GNSS - ADCP {prov['clock_offset_s']:+.2f} s "
-              f"(coarse {prov['clock_offset_coarse_s']:+.2f} s, speed correlation {prov['clock_offset_correlation']:.3f})")
+        say(f"GNSS: {prov['gnss']}; clock offset GNSS - ADCP {prov['clock_offset_s']:+.2f} s "
+            f"(coarse {prov['clock_offset_coarse_s']:+.2f} s, speed correlation {prov['clock_offset_correlation']:.3f})")
         if "bt_vs_gnss_speed_ratio_bt_over_gnss" in prov:
-            print(f"BT vs GNSS: speed ratio {prov['bt_vs_gnss_speed_ratio_bt_over_gnss']:.3f}, course offset (GNSS - BT) "
-                  f"{prov['bt_vs_gnss_course_offset_gnss_minus_bt_deg']:+.1f} +- {prov['bt_vs_gnss_course_offset_se_deg']:.1f} deg "
-                  f"over {prov['bt_vs_gnss_n']} samples")
+            say(f"BT vs GNSS: speed ratio {prov['bt_vs_gnss_speed_ratio_bt_over_gnss']:.3f}, course offset (GNSS - BT) "
+                f"{prov['bt_vs_gnss_course_offset_gnss_minus_bt_deg']:+.1f} +- {prov['bt_vs_gnss_course_offset_se_deg']:.1f} deg "
+                f"over {prov['bt_vs_gnss_n']} samples")
     else:
-        print(f"GNSS: {prov.get('gnss', 'none')}")
+        say(f"GNSS: {prov.get('gnss', 'none')}")
     warning = attrs.get("/attitude", {}).get("attitude_warning")
     if warning:
         warn(f"attitude: {warning}")
     if prov.get("reader_messages"):
         warn(prov["reader_messages"])
     if "sound_speed_changed" in prov:
-        print(f"sound speed: {prov['sound_speed_changed']}")
+        say(f"sound speed: {prov['sound_speed_changed']}")
     return 0
 
 
@@ -325,17 +325,17 @@ def cmd_correct(args) -> int:
         warn(f"{w}")
     v = result.vessel_velocity_m_s
     speed = np.hypot(v[:, 0], v[:, 1])
-    print(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
-          f"mean horizontal speed {np.nanmean(speed) if np.isfinite(speed).any() else float('nan'):.4f} m/s, "
-          f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
+    say(f"wrote {args.out}: method {result.method}, {len(v)} pings, "
+        f"mean horizontal speed {np.nanmean(speed) if np.isfinite(speed).any() else float('nan'):.4f} m/s, "
+        f"{int(np.sum(result.beams_used == 3))} three-beam pings, {int(np.sum(result.beams_used < 3))} lost")
     if result.water_velocity_m_s is not None:
         w = result.water_velocity_m_s
-        print(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
-              f"referenced to {'the bottom track' if result.provenance.water_reference == 'bt' else 'the GNSS'}")
+        say(f"water: {w.shape[1]} cells, {int(np.isfinite(w[..., 0]).sum())} of {w[..., 0].size} cell velocities, "
+            f"referenced to {'the bottom track' if result.provenance.water_reference == 'bt' else 'the GNSS'}")
     if result.provenance.installation_note:
         warn(f"{result.provenance.installation_note}")
     if result.provenance.moving_bed_note:
-        print(f"note: {result.provenance.moving_bed_note}")
+        say(f"note: {result.provenance.moving_bed_note}")
     return 0
 
 
@@ -355,8 +355,8 @@ def cmd_export(args) -> int:
     what = f"method {ds.attrs['processing_method']}, " if "processing_method" in ds.attrs else ""
     water = f"{ds.sizes['depth']} cells, " if "depth" in ds.sizes else "no water profile, "
     dated = "time" in ds.coords
-    print(f"wrote {args.out}: {what}{ds['case_time'].size} pings, {water}time "
-          f"{'UTC' if dated else 'in case-clock seconds (no UTC origin)'}, {ds.attrs['Conventions']} (h5netcdf)")
+    say(f"wrote {args.out}: {what}{ds['case_time'].size} pings, {water}time "
+        f"{'UTC' if dated else 'in case-clock seconds (no UTC origin)'}, {ds.attrs['Conventions']} (h5netcdf)")
     return 0
 
 
