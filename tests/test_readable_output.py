@@ -396,3 +396,32 @@ def test_a_frequency_above_the_pings_nyquist_is_said_to_be_an_alias():
     score = {"effect": "heave", "params": {"heave.omega_rad_s": 2 * np.pi * 1.652, "heave.cos_m": 0.001},
              "params_se": {"heave.omega_rad_s": 0.005, "heave.cos_m": 0.0004}}
     assert "Nyquist" in parameters_text(score, 0.746) and "Nyquist" not in parameters_text(score)
+
+def test_the_effect_table_shows_each_step_of_the_forward_selection_with_shares_of_the_base_gap():
+    """Rounds are not merged by effect name (a later round's numbers under an earlier round's row):
+    each step's rows say what they were judged against, and the share removed is of the base's gap,
+    so a step whose own gap is small reads 26 %, not 1480 %."""
+    from types import SimpleNamespace
+
+    from adcpdyn.estimators.diagnosis.report import steps, table, terminal_text
+
+    def score(k, effect, gap_after, sig):
+        return {"round": k, "effect": effect, "gap_after": gap_after, "significant": sig, "delta_ll": 1.0,
+                "delta_bic": -5.0, "p_value": 0.01, "params": {}, "params_se": {}, "status": "ok"}
+
+    ranking = [score(1, "compass_deviation", 0.012, True), score(1, "moving_bed", 0.445, False),
+               score(2, "moving_bed", -0.167, True), score(3, "heave", -0.224, False)]
+    r = SimpleNamespace(case="x", verdict="compass_deviation+moving_bed", statement="", gap_before=0.687,
+                        gap_after=-0.167, gap_z_before=11.1, gap_z_after=-2.7, velocity_error_before_m_s=None,
+                        where=[], ranking=ranking, selected=["compass_deviation", "moving_bed"], given={},
+                        base={}, noise={"bt": 0.01})
+    plan = steps(r)
+    assert [(k, against, round(ref, 3)) for k, against, ref, _ in plan] == [
+        (1, "the base", 0.687), (2, "the base + compass_deviation", 0.012),
+        (3, "the base + compass_deviation + moving_bed", -0.167)]
+    text = terminal_text(r)
+    rows = {ln.split()[0] + " " + ln.split()[1]: ln.split() for ln in text.splitlines()
+            if ln[:1].isdigit() and len(ln.split()) > 6}
+    assert rows["1 moving_bed"][5] == "0.445" and rows["2 moving_bed"][5] == "-0.167"
+    assert rows["2 moving_bed"][6] == "26" and rows["1 compass_deviation"][6] == "98"  # (0.012 + 0.167) / 0.687
+    assert "| 2 | moving_bed |" in table(r) and "| 26% |" in table(r)

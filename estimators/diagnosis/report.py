@@ -37,18 +37,22 @@ def table(result, n_where: int = 6) -> str:
               "| rank | channel | score (z) | detail |", "|---:|---|---:|---|"]
     for k, w in enumerate(r.where[:n_where]):
         lines.append(f"| {k + 1} | {w['channel']} | {w['score']:.1f} | {w['detail']} |")
-    lines += ["", "## Which effect", "",
-              "| effect | delta LL | delta BIC | p-value | gap after | shrink | significant | parameters (± SE) | solver |",
-              "|---|---:|---:|---:|---:|---:|:---:|---|---|"]
+    plan = steps(r)
+    lines += ["", "## Which effect, step by step (forward selection)", ""]
+    lines += [f"- step {k}: against {against} (held-out gap {ref:.3f} chi2/n)" for k, against, ref, _ in plan]
+    lines += ["", "| step | effect | delta LL | delta BIC | p-value | gap after | removes (of the base's gap) | "
+              "significant | parameters (± SE) | solver |", "|---:|---|---:|---:|---:|---:|---:|:---:|---|---|"]
     nyquist = result_nyquist_hz(r)
-    for s in r.ranking:
-        params = parameters_text(s, nyquist)
-        if len(params) > 160:
-            params = params[:157] + "..."
-        p = "n/a (no unknowns)" if not np.isfinite(s["p_value"]) else f"{s['p_value']:.2g}"
-        lines.append(f"| {s['effect']} | {s['delta_ll']:.1f} | {s['delta_bic']:.1f} | {p} | "
-                     f"{s['gap_after']:.3f} | {100 * s['shrink_fraction']:.0f}% | {'yes' if s['significant'] else ''} | "
-                     f"{params} | {s['status']} |")
+    for k, _, ref, scores in plan:
+        for s in scores:
+            params = parameters_text(s, nyquist)
+            if len(params) > 160:
+                params = params[:157] + "..."
+            p = "n/a (no unknowns)" if not np.isfinite(s["p_value"]) else f"{s['p_value']:.2g}"
+            share = removed_share(s, ref, r.gap_before)
+            lines.append(f"| {k} | {s['effect']} | {s['delta_ll']:.1f} | {s['delta_bic']:.1f} | {p} | "
+                         f"{s['gap_after']:.3f} | {'n/a' if not np.isfinite(share) else f'{100 * share:.0f}%'} | "
+                         f"{'yes' if s['significant'] else ''} | {params} | {s['status']} |")
     if r.base.get("skipped_effects"):
         lines += ["", "Not tried: " + "; ".join(f"{k} ({v})" for k, v in r.base["skipped_effects"].items())]
     lines += ["", noise_text(r)]
@@ -128,8 +132,34 @@ def result_nyquist_hz(result) -> float | None:
     return min((ping_nyquist_hz(run.case) for run in runs), default=None)
 
 
-EFFECT_LEGEND = ("dLL, dBIC: change of log-likelihood and BIC against the base (dBIC < 0: better); p: p-value; "
-                 "gap after: held-out excess chi2/n with the effect; shrink: share of the gap removed; sig: significant")
+EFFECT_LEGEND = ("dLL, dBIC: change of log-likelihood and BIC against the step's model (dBIC < 0: better); p: "
+                 "p-value; gap after: held-out excess chi2/n with the effect; removes: share of the base's held-out "
+                 "gap the effect removes at its step; sig: significant (the step's best significant one joins the "
+                 "model)")
+
+
+def steps(result) -> list:
+    """The forward selection as it ran: (step, the model the step's candidates are judged against,
+    that model's held-out gap, the step's scores), from the ranking's rounds and the effects chosen."""
+    ranking = [sc if isinstance(sc, dict) else sc.to_dict() for sc in result.ranking]
+    given = list(getattr(result, "given", {}) or {})
+    first = "the base" + (" with the run's own " + ", ".join(sorted({n.split(".")[0] for n in given})) if given else "")
+    out, ref, against = [], result.gap_before, first
+    for k in sorted({sc["round"] for sc in ranking}):
+        scores = [sc for sc in ranking if sc["round"] == k]
+        out.append((k, against, ref, scores))
+        if k > len(result.selected):
+            break
+        chosen = result.selected[k - 1]
+        ref = next((sc["gap_after"] for sc in scores if sc["effect"] == chosen), ref)
+        against = f"{first} + {' + '.join(result.selected[:k])}"
+    return out
+
+
+def removed_share(score: dict, step_gap: float, base_gap: float) -> float:
+    """The share of the base's held-out gap an effect removes at its step (NaN without a gap):
+    comparable across steps, where each step's own gap may be small."""
+    return (step_gap - score["gap_after"]) / base_gap if base_gap > 0 else float("nan")
 
 
 def terminal_text(result, n_where: int = 6, width: int | None = None) -> str:
@@ -156,8 +186,11 @@ def terminal_text(result, n_where: int = 6, width: int | None = None) -> str:
     for k, w in enumerate(r.where[:n_where]):
         lines += textwrap.wrap(f"{k + 1:>2}. {w['channel']} (z = {w['score']:.1f}): {w['detail']}", width=width,
                                subsequent_indent="      ")
-    lines += ["", "Which effect:"]
-    rows = {s["effect"]: s for s in r.ranking}
+    lines += ["", "Which effect, step by step (forward selection):"]
+    plan = steps(r)
+    lines += para("; ".join(f"step {k}: against {against} (held-out gap {ref:.3f} chi2/n)" for k, against, ref, _ in plan))
+    rows = {f"{k} {sc['effect']}": {**sc, "removed": removed_share(sc, ref, r.gap_before)}
+            for k, _, ref, scores in plan for sc in scores}
 
     def cell(column, name, value):
         if column.key == "p_value":
@@ -167,16 +200,15 @@ def terminal_text(result, n_where: int = 6, width: int | None = None) -> str:
         return column.text(value)
 
     columns = [Column("delta_ll", "dLL", "-", 1), Column("delta_bic", "dBIC", "-", 1), Column("p_value", "p", "-"),
-               Column("gap_after", "gap after", "chi2/n", 3), Column("shrink_fraction", "shrink", "%", 0, 100.0),
+               Column("gap_after", "gap after", "chi2/n", 3), Column("removed", "removes", "%", 0, 100.0),
                Column("significant", "sig", "")]
     if rows:
-        lines.append(text_table(rows, columns, first="effect", legend=EFFECT_LEGEND, width=width, cell=cell))
-        lines.append("Fitted unknowns (± SE) and the solver's status:")
+        lines.append(text_table(rows, columns, first="step effect", legend=EFFECT_LEGEND, width=width, cell=cell))
+        lines.append("Fitted unknowns (± SE) and the solver's status, by step:")
         nyquist = result_nyquist_hz(r)
-        for s in r.ranking:
-            lines += textwrap.wrap(f"  {s['effect']}: {parameters_text(s, nyquist) or 'no unknowns'}; {s['status']}",
-                                   width=width,
-                                   subsequent_indent="      ")
+        for name, sc in rows.items():
+            lines += textwrap.wrap(f"  {name}: {parameters_text(sc, nyquist) or 'no unknowns'}; {sc['status']}",
+                                   width=width, subsequent_indent="      ")
     if r.base.get("skipped_effects"):
         lines += para("Not tried: " + "; ".join(f"{k} ({v})" for k, v in r.base["skipped_effects"].items()))
     lines += para(noise_text(r))
