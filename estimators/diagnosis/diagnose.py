@@ -866,9 +866,9 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                  and s.shrink_fraction >= ALTERNATIVE_SHARE * best.shrink_fraction]
         if close:
             alternatives.append({"chosen": best.effect, "round": round_, "shrink": best.shrink_fraction,
-                                 "delta_bic": best.delta_bic,
+                                 "delta_bic": best.delta_bic, "gap_after": best.gap_after,
                                  "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
-                                                   **_reading_of(s, cases)} for s in close]})
+                                                   "gap_after": s.gap_after, **_reading_of(s, cases)} for s in close]})
         selected.append(best.effect)
         selected_terms += _terms(base, best.effect)
         current_name = tried[best.effect][0]
@@ -883,10 +883,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         remaining = z_after > config.gap_z and gap_after > config.min_gap
         verdict = "+".join(selected)
         chosen = [next(s for s in ranking if s.effect == name and s.significant) for name in selected]
+        steps = [gap_before] + [s.gap_after for s in chosen]
         statement = (f"{' then '.join(selected)} explain{'s' if len(selected) == 1 else ''} the gap: held-out excess chi2 "
                      f"{gap_before:.3f} -> {gap_after:.3f} ("
-                     + "; ".join(f"{s.effect}: shrink {100 * s.shrink_fraction:.0f}%, delta BIC {s.delta_bic:.1f}"
-                                 for s in chosen) + ")")
+                     + "; ".join(f"{s.effect}: {a:.3f} -> {b:.3f}, delta BIC {s.delta_bic:.1f}"
+                                 for s, a, b in zip(chosen, steps, steps[1:])) + ")")
         if remaining:
             after = _where(*current, cv[current_name], noise)  # where what is left lies, not where the base's gap did
             statement += (f"; a significant gap remains after {'it' if len(selected) == 1 else 'them'} (excess chi2 "
@@ -914,8 +915,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     for a in alternatives:
         statement += (f"; {' and '.join(x['effect'] for x in a['alternatives'])} explain"
                       f"{'s' if len(a['alternatives']) == 1 else ''} nearly as much as {a['chosen']} ("
-                      + ", ".join(f"shrink {100 * x['shrink']:.0f}%" for x in a["alternatives"])
-                      + f" vs {100 * a['shrink']:.0f}%): these data hardly tell them apart, so read "
+                      + "held-out gap after " + ", ".join(f"{x['gap_after']:.3f}" for x in a["alternatives"])
+                      + f" vs {a['gap_after']:.3f}): these data hardly tell them apart, so read "
                       f"{a['chosen']} as the likeliest of them, not as proven"
                       + "".join(f" ({x['effect']}: {x['reading']['text']})" for x in a["alternatives"] if "reading" in x))
     for sc in chosen if selected else []:
