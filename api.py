@@ -166,7 +166,7 @@ def _source(case, what: str = "case") -> _Source:
 def _prepared(src: _Source) -> tuple[_Source, list]:
     """The case restricted to what its attitude record covers, and the notes (warnings, what was left out)."""
     from .cases.coverage import restrict_to_coverage
-    from .cases.io import case_warnings
+    from .cases.validation import case_warnings
 
     notes = case_warnings(src.case)
     case, note = restrict_to_coverage(src.case, source=src.path or src.case.name)

@@ -207,7 +207,7 @@ def cmd_import(args) -> int:
 
 def cmd_info(args) -> int:
     from .cases.coverage import restrict_to_coverage
-    from .cases.io import case_warnings
+    from .cases.validation import case_warnings
     from .cases.summary import summarise
 
     case = _read(args.case)
@@ -227,7 +227,7 @@ def _prepare(path, say: bool = True):
     """Read a case for a verb that uses the attitude: its warnings (printed when ``say``) and the
     case restricted to what the attitude record covers (never extrapolated)."""
     from .cases.coverage import restrict_to_coverage
-    from .cases.io import case_warnings
+    from .cases.validation import case_warnings
 
     case = _read(path)
     notes = case_warnings(case)

@@ -3,7 +3,7 @@
 Every verb that uses the attitude (``correct``, ``compare``, ``calibrate``, ``diagnose``,
 one case or many) calls :func:`restrict_to_coverage` on the case it read, and works on
 what it returns. The tolerance is stated once: a time within one median sample interval
-of a record's ends counts as inside it (:func:`~adcpdyn.cases.io.time_tolerance_s`).
+of a record's ends counts as inside it (:func:`~adcpdyn.cases.validation.time_tolerance_s`).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 
 from .case import Case
-from .io import time_tolerance_s, validate_case
+from .validation import time_tolerance_s, validate_case
 
 __all__ = ["MAX_DROPPED_FRACTION", "restrict_to_coverage", "reference_at"]
 

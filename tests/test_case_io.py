@@ -21,7 +21,9 @@ from adcpdyn.cases.case import (
     Vessel,
     Water,
 )
-from adcpdyn.cases.io import CaseFormatError, read_case, validate_case, write_case
+from adcpdyn.cases.checks import CaseFormatError
+from adcpdyn.cases.io import read_case, write_case
+from adcpdyn.cases.validation import validate_case
 from fuzzlib import _del, _del_attr, _replace, _set_attr  # the malformed files' edits, one copy
 
 N, M, K, L = 20, 15, 3, 10

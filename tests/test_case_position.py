@@ -11,7 +11,8 @@ import pytest
 from test_case_io import N, assert_same, make_case
 
 from adcpdyn.cases.case import Position, format_utc, parse_utc
-from adcpdyn.cases.io import CaseFormatError, read_case, write_case
+from adcpdyn.cases.checks import CaseFormatError
+from adcpdyn.cases.io import read_case, write_case
 
 P = 7
 

@@ -12,7 +12,8 @@ from conftest import shortened
 
 from adcpdyn.cases.coverage import MAX_DROPPED_FRACTION, reference_at, restrict_to_coverage
 from adcpdyn.cases.corrected import read_correction
-from adcpdyn.cases.io import case_warnings, read_case, write_case
+from adcpdyn.cases.io import read_case, write_case
+from adcpdyn.cases.validation import case_warnings
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
 from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem

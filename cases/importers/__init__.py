@@ -124,7 +124,8 @@ def _attr_value(v):
 def write_imported(case, attrs: dict, out, source=None) -> None:
     """Write the case and its audit attributes atomically; never over the source file."""
     from ..atomic import atomic_path, refuse_overwrite_input
-    from ..io import validate_case, write_case
+    from ..io import write_case
+    from ..validation import validate_case
 
     refuse_overwrite_input(out, source)
     # checked under the names the user gave (the temporary file's is nobody's)
