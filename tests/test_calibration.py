@@ -165,7 +165,7 @@ def test_one_straight_run_names_moving_bed_vs_yaw_and_its_se_carries_it(lake_cas
     assert assumed["se_if_bed_moves_rad"] == pytest.approx(free.installation_ypr_se_rad[0], rel=1e-6)
     assert assumed["value_if_bed_moves_rad"] == pytest.approx(free.installation_ypr_rad[0], abs=1e-3 * assumed["se_if_bed_moves_rad"])
     assert "if the bed moves, the installation yaw is known only to" in " ".join(auto.warnings)
-    from adcpdyn.cli import _print_calibration  # the headline carries both readings, not a warning alone
+    from adcpdyn.cli.verbs.calibration import _print_calibration  # the headline carries both readings, not a warning alone
 
     _print_calibration(auto, "lake")
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("installation yaw/pitch/roll"))

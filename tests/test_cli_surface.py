@@ -15,7 +15,8 @@ import pytest
 import adcpdyn
 from adcpdyn.cases.hashing import sha256_of
 from conftest import assert_provenance
-from adcpdyn.cli import build_parser, main
+from adcpdyn.cli import main
+from adcpdyn.cli.parser import build_parser
 
 
 @pytest.fixture(scope="module")
@@ -213,7 +214,7 @@ def test_contradicting_options_and_wrong_files_are_refused_in_one_line_naming_th
 def test_noise_levels_are_printed_with_their_units():
     import numpy as np
 
-    from adcpdyn.cli import noise_levels_line
+    from adcpdyn.text import noise_levels_line
 
     line = noise_levels_line({"heading": float(np.radians(0.5)), "bt": 0.0637, "range": 0.396, "reference": None,
                               "motion": 0.19})
@@ -237,7 +238,8 @@ def test_a_reader_that_stops_reading_ends_the_command_quietly():
 def test_compass_deviation_prior_flag_sets_the_calibrations_prior():
     """`--compass-deviation-prior-deg` is the prior's SD of B and C in degrees; without it the
     calibration's default (1 deg)."""
-    from adcpdyn.cli import _calibration_config, build_parser
+    from adcpdyn.cli.parser import build_parser
+    from adcpdyn.cli.verbs.calibration import calibration_config as _calibration_config
     from adcpdyn.estimators.calibration.problem import CalibrationConfig
 
     parse = lambda *more: build_parser().parse_args(["calibrate", "m.h5", "--out", "c.json", *more])

@@ -108,7 +108,7 @@ def test_compiled_calibration_problem_equals_the_interpreted_one(cache, scenario
 
 
 def test_calibrate_help_states_the_compile_threshold():
-    from adcpdyn.cli import build_parser
+    from adcpdyn.cli.parser import build_parser
     from adcpdyn.estimators.calibration.problem import COMPILE_MIN_PINGS
 
     sub = next(a for a in build_parser()._actions if a.dest == "command").choices["calibrate"]

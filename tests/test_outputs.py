@@ -115,9 +115,9 @@ def test_out_in_a_missing_folder_is_refused_before_any_work(tmp_path, capsys, mo
 
 @pytest.mark.parametrize("verb", ["correct", "calibrate", "diagnose"])
 def test_impossible_out_is_refused_before_reading_the_case(tmp_path, capsys, verb, monkeypatch):
-    import adcpdyn.cli as cli
+    import adcpdyn.cases.io as case_io
 
-    monkeypatch.setattr(cli, "_read", lambda path: (_ for _ in ()).throw(AssertionError("case read before --out")))
+    monkeypatch.setattr(case_io, "read_case", lambda path: (_ for _ in ()).throw(AssertionError("case read before --out")))
     case = tmp_path / "c.h5"
     case.write_bytes(b"whatever")
     assert main([verb, str(case), "--out", str(tmp_path / "no" / "such" / "out.x")]) == 2
@@ -151,7 +151,7 @@ def test_read_only_folder_is_refused(tmp_path):
 
 @pytest.mark.parametrize("fails", [True, False])
 def test_solver_chatter_on_the_descriptor_is_dropped_only_when_the_command_fails(tmp_path, capfd, monkeypatch, fails):
-    import adcpdyn.cli as cli
+    import adcpdyn.cli.parser as cli
 
     def chatty(args):
         os.write(2, b'CasADi - WARNING("nlp_grad_f failed: NaN detected")\nanother line\n')
