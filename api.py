@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # pragma: no cover - names for annotations only
 
     from .cases.case import Case
     from .estimators.asc import Correction
-    from .estimators.calibration.problem import CalibrationConfig
+    from .estimators.calibration.config import CalibrationConfig
     from .estimators.calibration.record import CalibrationRecord
     from .estimators.calibration.result import CalibrationResult
     from .estimators.diagnosis.diagnose import DiagnosisResult
@@ -397,7 +397,8 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
     ValueError
         An unknown option, a bad case, or a problem the calibration refuses (one line).
     """
-    from .estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from .estimators.calibration.config import CalibrationConfig
+    from .estimators.calibration.problem import CalibrationProblem
 
     config = config or CalibrationConfig()
     known = {f.name for f in dataclasses.fields(CalibrationConfig)}

@@ -12,7 +12,7 @@ import json
 import time
 from dataclasses import dataclass
 
-from .estimators.calibration.problem import CalibrationConfig
+from .estimators.calibration.config import CalibrationConfig
 from .solvers.cluster import LOCAL, SERIAL, check_address, dask_client
 
 AUTO = "auto"

@@ -61,7 +61,8 @@ def print_targets(res: dict, targets: list[Target]) -> None:
 
 def timed_calibration(case, fit=None, **config):
     """(result, setup seconds, solve seconds) of one calibration, warnings silenced."""
-    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.config import CalibrationConfig
+    from ..estimators.calibration.problem import CalibrationProblem
 
     tic = time.perf_counter()
     problem = CalibrationProblem(case, CalibrationConfig(**config), fit=fit)

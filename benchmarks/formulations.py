@@ -16,7 +16,7 @@ KEYS = ("tangential_radial_rms_m_s", "lever_arm_rms_error_m", "max_constraint_vi
 def bench_formulations(seeds: int, starts: int) -> dict:
     """Every formulation on each scenario and noise seed (one case per seed, shared by all)."""
     from ..cases.scenario import get_scenario
-    from ..estimators.calibration.problem import CalibrationConfig
+    from ..estimators.calibration.config import CalibrationConfig
     from ..estimators.calibration.formulation_compare import compare_formulations
     from ..cases.simulation import simulate
 

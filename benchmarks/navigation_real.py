@@ -28,7 +28,8 @@ WINDOWS = {"RiverPro_test01.PD0": (2, None), "winriver01.PD0": (3, None),
 
 
 def _calibrate(cases, nav: str, starts: int, **options) -> tuple:
-    from ..estimators.calibration.problem import CalibrationConfig, calibrate_runs
+    from ..estimators.calibration.config import CalibrationConfig
+    from ..estimators.calibration.problem import calibrate_runs
 
     tic = time.perf_counter()
     r = calibrate_runs(cases, CalibrationConfig(n_starts=starts, navigation=nav, **options))

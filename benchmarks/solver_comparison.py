@@ -113,7 +113,8 @@ def _child(key: str, seed: int, starts: int, options: str) -> None:
     """Entry of one solver's run in its own process: the problem built, the solver measured."""
     import warnings
 
-    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.config import CalibrationConfig
+    from ..estimators.calibration.problem import CalibrationProblem
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

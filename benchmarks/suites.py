@@ -21,7 +21,8 @@ SUITES = ("calibration", "correction", "formulations", "solvers", "scale", "surv
 
 
 def _calibrate(case, **kw):
-    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.config import CalibrationConfig
+    from ..estimators.calibration.problem import CalibrationProblem
 
     tic = time.perf_counter()
     r = CalibrationProblem(case, CalibrationConfig(**kw)).solve()

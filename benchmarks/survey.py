@@ -60,7 +60,8 @@ def _truth(cases) -> dict:
 
 
 def _solve(cases, starts: int, seed: int = 0):
-    from ..estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from ..estimators.calibration.config import CalibrationConfig
+    from ..estimators.calibration.problem import CalibrationProblem
 
     tic = time.perf_counter()
     problem = CalibrationProblem(cases if len(cases) > 1 else cases[0], CalibrationConfig(n_starts=starts, seed=seed))
@@ -152,7 +153,7 @@ def heading_coverage(seeds: int, heading_deg: float = COMPASS_HEADING_NOISE_DEG,
 def prior_compass(seed: int) -> tuple:
     """(A, B, C) of a survey's compass: A as river_survey's spec draws it (8-25 deg, either sign), B
     and C from the calibration's deviation prior."""
-    from ..estimators.calibration.problem import CalibrationConfig
+    from ..estimators.calibration.config import CalibrationConfig
 
     rng = np.random.default_rng(10_000 + seed)
     a = rng.uniform(np.deg2rad(8.0), np.deg2rad(25.0)) * rng.choice([-1.0, 1.0])

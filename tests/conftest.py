@@ -152,7 +152,8 @@ def calibrated_pool_m0(folder, n_starts: int):
 
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
-    from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from adcpdyn.estimators.calibration.config import CalibrationConfig
+    from adcpdyn.estimators.calibration.problem import CalibrationProblem
 
     m0 = simulate(get_scenario("pool_m0"), seed=1)
     with warnings.catch_warnings():

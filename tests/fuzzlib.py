@@ -61,7 +61,8 @@ def base_files(folder: Path) -> dict:
 
     from adcpdyn.cases.io import write_case
     from adcpdyn.cases.scenario import get_scenario
-    from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from adcpdyn.estimators.calibration.config import CalibrationConfig
+    from adcpdyn.estimators.calibration.problem import CalibrationProblem
     from adcpdyn.cases.simulation import simulate
 
     folder.mkdir(parents=True, exist_ok=True)

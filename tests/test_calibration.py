@@ -13,7 +13,8 @@ import pytest
 from conftest import noise_free, without_pings
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate
+from adcpdyn.estimators.calibration.config import CalibrationConfig
+from adcpdyn.estimators.calibration.problem import CalibrationProblem, calibrate
 from adcpdyn.solvers.multistart import SolverOptions
 from adcpdyn.estimators.statistics.evaluation import calibration_errors, true_attitude
 from adcpdyn.models.measurement import bottom_track_function

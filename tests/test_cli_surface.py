@@ -240,7 +240,7 @@ def test_compass_deviation_prior_flag_sets_the_calibrations_prior():
     calibration's default (1 deg)."""
     from adcpdyn.cli.parser import build_parser
     from adcpdyn.cli.verbs.calibration import calibration_config as _calibration_config
-    from adcpdyn.estimators.calibration.problem import CalibrationConfig
+    from adcpdyn.estimators.calibration.config import CalibrationConfig
 
     parse = lambda *more: build_parser().parse_args(["calibrate", "m.h5", "--out", "c.json", *more])
     assert _calibration_config(parse("--compass-deviation-prior-deg", "0.5")).compass_deviation_prior_rad == \

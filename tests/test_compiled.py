@@ -11,7 +11,8 @@ import pytest
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+from adcpdyn.estimators.calibration.config import CalibrationConfig
+from adcpdyn.estimators.calibration.problem import CalibrationProblem
 from adcpdyn.solvers import compiled
 
 pytestmark = pytest.mark.skipif(not compiled.available(), reason="no C compiler")

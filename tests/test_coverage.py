@@ -16,7 +16,8 @@ from adcpdyn.cases.io import read_case, write_case
 from adcpdyn.cases.validation import case_warnings
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cli import main
-from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+from adcpdyn.estimators.calibration.config import CalibrationConfig
+from adcpdyn.estimators.calibration.problem import CalibrationProblem
 from adcpdyn.cases.simulation import simulate
 
 SANE_M_S = 20.0  # no boat in these cases moves faster

@@ -96,7 +96,8 @@ def test_every_verb_refuses_another_instruments_calibration_and_writes_nothing(p
 
 
 def test_joint_calibration_refuses_two_instruments_and_warns_on_two_sites():
-    from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from adcpdyn.estimators.calibration.config import CalibrationConfig
+    from adcpdyn.estimators.calibration.problem import CalibrationProblem
 
     m0 = simulate(get_scenario("pool_m0"), seed=1)
     sc = get_scenario("diag_boat")

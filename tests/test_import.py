@@ -189,7 +189,8 @@ def test_import_refuses_to_overwrite_input(tmp_path, capsys):
 def _calibrated_misalignment(case, moving_bed="auto") -> tuple[float, float]:
     import warnings
 
-    from adcpdyn.estimators.calibration.problem import CalibrationConfig, calibrate
+    from adcpdyn.estimators.calibration.config import CalibrationConfig
+    from adcpdyn.estimators.calibration.problem import calibrate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -119,7 +119,8 @@ def test_sqpmethod_calibration_reaches_ipopts_optimum(pool_m0):
     """The same small simulated calibration by IPOPT and by sqpmethod (qrqp, Gauss-Newton):
     one optimum, to the tolerance, each with its own status."""
     from adcpdyn.cases.simulation import simulate
-    from adcpdyn.estimators.calibration.problem import CalibrationConfig, calibrate
+    from adcpdyn.estimators.calibration.config import CalibrationConfig
+    from adcpdyn.estimators.calibration.problem import calibrate
 
     case = simulate(pool_m0, seed=2)
     out = {}

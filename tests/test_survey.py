@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from adcpdyn.cases.scenario import get_scenario
-from adcpdyn.estimators.calibration.problem import CalibrationConfig, CalibrationProblem, calibrate, calibrate_runs
+from adcpdyn.estimators.calibration.config import CalibrationConfig
+from adcpdyn.estimators.calibration.problem import CalibrationProblem, calibrate, calibrate_runs
 from adcpdyn.cases.simulation import simulate
 
 Z_MAX = 3.5

@@ -15,7 +15,7 @@ from .correction import batch_out, run_batch_table
 def calibration_config(args, formulation=None, one=True):
     """The CalibrationConfig of the flags; ``one``: a single calibration, whose starts go where
     --scheduler/--workers say (with many cases those flags place the cases, each solved in its worker)."""
-    from ...estimators.calibration.problem import CalibrationConfig
+    from ...estimators.calibration.config import CalibrationConfig
 
     if args.bed_knots is not None and args.moving_bed != "section":
         raise ValueError(f"--bed-knots {args.bed_knots}: sets the values of --moving-bed section, not of --moving-bed "

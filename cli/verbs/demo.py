@@ -19,7 +19,8 @@ def cmd_demo(args) -> int:
     from ...cases.io import write_case
     from ...cases.scenario import get_scenario
     from ...cases.summary import summarise
-    from ...estimators.calibration.problem import CalibrationConfig, CalibrationProblem
+    from ...estimators.calibration.config import CalibrationConfig
+    from ...estimators.calibration.problem import CalibrationProblem
     from ...estimators.statistics.evaluation import calibration_errors
     from ...estimators.statistics.metrics import format_table, velocity_metrics
     from ...models.rotations import euler_matrix

@@ -8,7 +8,8 @@ import time
 import numpy as np
 
 from ...cases.case import Case
-from .problem import CalibrationConfig, CalibrationProblem
+from .config import CalibrationConfig
+from .problem import CalibrationProblem
 from ..formulations import FORMULATIONS
 
 

@@ -41,7 +41,8 @@ from ...models.effects import CATALOG, get_effect
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
-from ..calibration.problem import ATTITUDES, choose_attitude
+from ..calibration.config import ATTITUDES
+from ..calibration.problem import choose_attitude
 from ..calibration.record import CalibrationRecord
 from ..statistics.hac import andrews_lags, at_least_white, newey_west, ping_bins, sandwich
 from ..measurement_model import (NAVIGATION_CHOICES, EffectTerm, ModelSpec, RunSetup, choose_navigation,

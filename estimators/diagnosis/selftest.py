@@ -105,7 +105,8 @@ def calibration_of(platform: str, slow_attitude: bool, ar1: float, sim_seed: int
     """The paper's workflow: the platform calibrated on an effect-free run of its own (another
     noise seed, another case name, so no run-specific number of it is pinned in the diagnosis),
     as the typed record a diagnosis reads."""
-    from ..calibration.problem import CalibrationConfig, calibrate
+    from ..calibration.config import CalibrationConfig
+    from ..calibration.problem import calibrate
     from ..calibration.record import as_record
 
     case = simulate(platform_scenario(platform, slow_attitude, ar1), seed=(sim_seed + 7919) % (2**31 - 1))
