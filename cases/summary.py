@@ -11,21 +11,29 @@ from .case import Case
 
 
 def dominant_period_s(t, x, f_min_hz=0.02, f_max_hz=3.0) -> float:
-    """Period of the strongest Lomb-Scargle peak of irregular samples (NaN if too few).
-
-    Irregular sampling keeps peaks above the mean Nyquist frequency distinguishable,
-    but with few samples per cycle the peak may still be an alias.
-    """
+    """Period of the strongest Lomb-Scargle peak of irregular samples, sought from ``f_min_hz`` up
+    to ``f_max_hz`` or the samples' Nyquist frequency (0.5 / median interval), whichever is lower:
+    with one sample per ping and a few per cent of jitter, a peak above it is an alias, not a
+    motion (NaN if too few samples or no band left)."""
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
     ok = np.isfinite(t) & np.isfinite(x)
     t, x = t[ok], x[ok]
     if t.size < 8 or np.ptp(x) == 0:
         return float("nan")
+    f_max_hz = min(f_max_hz, sampled_nyquist_hz(t))
+    if f_max_hz <= f_min_hz:
+        return float("nan")
     x = x - np.polyval(np.polyfit(t - t[0], x, 1), t - t[0])
     f = np.linspace(f_min_hz, f_max_hz, 3000)
     power = lombscargle(t, x, 2 * np.pi * f)
     return float(1.0 / f[np.argmax(power)])
+
+
+def sampled_nyquist_hz(t) -> float:
+    """0.5 / the median interval of sample times (NaN for fewer than two)."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    return 0.5 / float(np.median(dt)) if dt.size else float("nan")
 
 
 def error_velocity_levels(radial_m_s, beam_dirs) -> tuple[float, float, int]:
@@ -76,10 +84,12 @@ def summarise(case: Case) -> str:
     missing = int((~a.complete()).sum())
     lines.append(f"attitude     {a.time_s.size} samples ({a.frame} frame), {_intervals(a.time_s)}"
                  + (f"; {missing} with a NaN angle" if missing else ""))
+    nyquist_hz = sampled_nyquist_hz(a.time_s)
     for label, x in (("roll", ypr[:, 2]), ("pitch", ypr[:, 1])):
         lines.append(
             f"  {label:<6}     amplitude {np.rad2deg(amp(x)):.2f} deg, mean {np.rad2deg(np.nanmean(x)):.2f} deg, "
             f"dominant period {dominant_period_s(a.time_s, x):.2f} s"
+            + (f" (sought up to the samples' Nyquist {nyquist_hz:.2g} Hz)" if nyquist_hz < 3.0 else "")
         )
     heading = ypr[np.isfinite(ypr[:, 0]), 0]
     lines.append(f"  heading    {np.rad2deg(heading[0]) % 360:.1f} -> {np.rad2deg(heading[-1]) % 360:.1f} deg, "

@@ -27,3 +27,17 @@ def test_lomb_scargle_at_the_nyquist_of_regular_samples():
     omega = np.array([2 * np.pi, 1.0, 4 * np.pi])
     assert np.allclose(lomb_scargle(t, y, omega), lombscargle(t, y, omega), rtol=1e-11, atol=0)
     assert abs(lomb_scargle(t, y, omega)[0] - 50.0) < 1e-9  # 0.5 * (sum y cos)^2 / sum cos^2 = 0.5 * 100^2 / 100
+
+
+def test_info_dominant_period_is_sought_below_the_samples_nyquist():
+    """One attitude sample per 0.67-s ping (a few per cent of jitter) and a 9-s roll: the info
+    summary finds 9 s, not an above-Nyquist alias of the jitter; a record too coarse for the band
+    gives NaN."""
+    from adcpdyn.cases.summary import dominant_period_s, sampled_nyquist_hz
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.53, 0.90, 272))
+    x = np.deg2rad(1.0) * np.sin(2 * np.pi * t / 9.0) + np.deg2rad(0.3) * rng.standard_normal(t.size)
+    assert abs(dominant_period_s(t, x) - 9.0) < 0.3
+    assert 1.0 / dominant_period_s(t, rng.standard_normal(t.size)) <= sampled_nyquist_hz(t)  # noise: never above
+    assert np.isnan(dominant_period_s(np.arange(20) * 30.0, rng.standard_normal(20)))  # Nyquist 0.017 Hz < 0.02
