@@ -13,7 +13,8 @@ from conftest import REAL, refit_without, without_pings
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.estimators.diagnosis import where
-from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, _cv_residuals, _folds, diagnose
+from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, diagnose
+from adcpdyn.estimators.diagnosis.heldout import cv_residuals, row_folds
 from adcpdyn.estimators.calibration.record import as_record
 from adcpdyn.estimators.diagnosis.selftest import oracle_shrink, with_effect
 from adcpdyn.models.effects import CATALOG, get_effect
@@ -64,8 +65,8 @@ def test_leave_fold_out_step_is_exact_for_a_linear_model():
     x = np.linalg.lstsq(A, y, rcond=None)[0]
     model = SimpleNamespace(times=t, mask=np.ones(n), weights=lambda sigma: np.ones(n))
     fit = SimpleNamespace(jacobian=A, raw=A @ x - y, sigma={})
-    pred = _cv_residuals(model, fit, folds=4, block_s=100 / 12)
-    fold = _folds(model, 4, 100 / 12)
+    pred = cv_residuals(model, fit, folds=4, block_s=100 / 12)
+    fold = row_folds(model, 4, 100 / 12)
     assert sorted(np.unique(fold)) == [0, 1, 2, 3]
     for k in range(4):
         np.testing.assert_allclose(pred[fold == k], refit_without(A, y, fold != k), atol=1e-5)
@@ -83,7 +84,7 @@ def test_held_out_chi_square_of_a_correct_model_is_one_whatever_its_unknowns():
     y = A @ rng.normal(size=knots.size) + rng.normal(size=n)
     x = np.linalg.lstsq(A, y, rcond=None)[0]
     model = SimpleNamespace(times=t, mask=np.ones(n), weights=lambda sigma: np.ones(n))
-    pred = _cv_residuals(model, SimpleNamespace(jacobian=A, raw=A @ x - y, sigma={}), folds=5, block_s=2.0)
+    pred = cv_residuals(model, SimpleNamespace(jacobian=A, raw=A @ x - y, sigma={}), folds=5, block_s=2.0)
     assert np.mean(pred**2) == pytest.approx(1.0, abs=0.06)
 
 
@@ -477,9 +478,9 @@ def test_a_channel_sampled_at_the_folds_period_is_spread_over_the_folds():
     fixes = np.arange(14.0, 340.0, 10.0)
     times = np.concatenate([pings, fixes])
     model = SimpleNamespace(times=times, row_run=np.zeros(times.size, dtype=int))
-    fold = _folds(model, 5, 2.0)
+    fold = row_folds(model, 5, 2.0)
     assert set(fold[pings.size:]) == {0, 1, 2, 3, 4}
-    assert np.array_equal(fold, _folds(model, 5, 2.0))  # the same every call
+    assert np.array_equal(fold, row_folds(model, 5, 2.0))  # the same every call
 
 
 @pytest.mark.slow  # 26 s: `make test-slow`; the field self-test bench covers the same on three files

@@ -285,7 +285,7 @@ def test_field_errors_are_written_on_the_recorded_channels():
 def test_colour_factor_is_one_for_white_gains_and_large_for_a_slow_wander():
     """The long-run over white variance of the per-bin likelihood gains: about 1 for white gains,
     near (1 + rho) / (1 - rho) = 9 for AR(1) gains with rho = 0.8 (Bartlett-shrunk below it)."""
-    from adcpdyn.estimators.diagnosis.diagnose import _colour_factor
+    from adcpdyn.estimators.diagnosis.heldout import colour_factor
 
     rng = np.random.default_rng(7)
     n = 4000
@@ -301,7 +301,7 @@ def test_colour_factor_is_one_for_white_gains_and_large_for_a_slow_wander():
     factors = []
     for d in (white, ar):
         ref = SimpleNamespace(raw=np.sqrt(d - d.min() + 1.0))  # (ref/s)^2 - 0 = d + const: the constant is centred out
-        factors.append(_colour_factor(model, fit, model, ref, {(0, "bt"): 1.0}))
+        factors.append(colour_factor(model, fit, model, ref, {(0, "bt"): 1.0}))
     assert 1.0 <= factors[0] < 1.3
     assert 4.0 < factors[1] < 10.0
 

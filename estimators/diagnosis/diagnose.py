@@ -28,7 +28,6 @@ misses, which catalog effects explain it, and how far the held-out gap shrinks.
 from __future__ import annotations
 
 import dataclasses
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -37,98 +36,26 @@ import numpy as np
 from scipy import stats
 
 from ...cases.case import Case
-from ...models.effects import CATALOG, get_effect
+from ...models.effects import get_effect
 from ...models.motion import AttitudeParams, evaluate_attitude
-from ...solvers.multistart import SolverOptions
 from ..attitude_fit import fit_attitude
-from ..calibration.config import ATTITUDES
 from ..calibration.problem import choose_attitude
 from ..calibration.record import CalibrationRecord
-from ..statistics.hac import andrews_lags, at_least_white, newey_west, ping_bins, sandwich
-from ..measurement_model import (NAVIGATION_CHOICES, EffectTerm, ModelSpec, RunSetup, choose_navigation,
-                                 course_offset_rad, heading_centre, knot_times, ping_knots)
+from ..measurement_model import (EffectTerm, ModelSpec, RunSetup, choose_navigation, course_offset_rad, heading_centre,
+                                 knot_times, ping_knots)
 from . import where as where_mod
 from .readings import sound_speed_reading
 from .model import BOUND_TOL, PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
-from ..statistics.normal_equations import (as_sparse, group_levels, inverse_columns, leave_out_predictions,
-                                          marginal_covariance, redundancy)
+from ..statistics.normal_equations import group_levels, redundancy
+from .config import DiagnosisConfig
+from .covariance import coloured_covariance, covariance, detection_limits, hac_standard_errors, standard_errors
+from .heldout import colour_factor, cv_residuals, heldout_gap, heldout_improvement_z
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "vertical")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
 VCE_ITERATIONS = 3  # variance-component re-estimations of the base (each with a refit)
-FOLD_SEED = 20261125  # the held-out blocks' dealing to folds: shuffled, the same every call
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
-
-
-@dataclass(frozen=True)
-class DiagnosisConfig:
-    """Which effects to try and when a difference counts.
-
-    An effect is significant when its coloured-residual BIC (``delta_bic_hac``: the likelihood
-    ratio over the long-run/white variance ratio of its per-bin gains, never below the white one)
-    improves on the current model's by more than ``bic_margin`` AND it removes at least
-    ``min_shrink`` of the held-out gap. A gap is
-    significant when its z-score (excess chi-square over its null standard deviation)
-    exceeds ``gap_z`` and it exceeds ``min_gap`` (a practical floor: noise levels are
-    estimated, so a few percent of excess is not evidence). Up to ``max_effects`` effects
-    are chosen one after another; an effect sharing more than ``confounded_share`` of its
-    parameters' variance with a base unknown or a chosen effect is named, not chosen.
-
-    On a random-walk base (real files) the held-out gap need only shrink by ``min_shrink_walk``: a real file keeps structure no catalog
-    effect explains, so a real effect removes a smaller share of the whole gap. Its gap's z is
-    not a gate there: the noise levels are the data's own (variance components), so the white
-    z of what they leave says little; the coloured BIC is the test. For the same reason the held-out
-    evidence may instead be the paired one, ``heldout_z`` above ``heldout_z_walk``: once a file's own
-    effects are in the model its held-out excess sits at the floor of levels estimated on it, so no
-    share of it can shrink (winriver01 with its compass deviation and bed: excess -0.02, while a
-    0.15 m/s heave improved the held-out prediction at z 17); the improvement must then also be a
-    practical one, ``min_gain_walk`` of the held-out excess (a few percent of the noise variance per
-    row), since on a long run a z grows with the pings whatever the size: on a 3000-ping simulated
-    river transect a reference lever arm of -0.23 m took up 0.006 of it at z 5.5 (what the base's
-    sampled attitude leaves, not a lever arm), while the smallest injected errors named on the
-    real files remove 0.03 (2 % sound speed) and more.
-
-    ``given`` effects (a file's own, found on its clean run) are fitted first and stay in every
-    model: the candidates are judged on top of them, and they are reported with their estimates.
-    """
-
-    effects: tuple = tuple(CATALOG)
-    given: tuple = ()  # effects the run is known to carry (a clean file's own): fitted in every model, not candidates
-    cv_folds: int = 5
-    cv_block_s: float = 2.0
-    bic_margin: float = 10.0
-    min_shrink: float = 0.25
-    min_shrink_walk: float = 0.05
-    heldout_z_walk: float = 2.0
-    min_gain_walk: float = 0.02
-    gap_z: float = 6.0
-    min_gap: float = 0.1
-    max_modes: int = 3
-    max_effects: int = 3
-    confounded_share: float = 0.9
-    attitude: str = "auto"  # beams' attitude: model | samples | auto (as the calibration chooses)
-    navigation: str = "auto"  # the base's vessel velocity: random_walk (a velocity per ping) | knots | auto
-    workers: int = min(2, os.cpu_count() or 1)  # threads refitting a round's candidates at once
-    solver: SolverOptions = SolverOptions(tol=1e-6, max_iter=200, hessian="gauss-newton", expand=False, mu_init=1e-5)
-
-    def __post_init__(self):
-        for name in self.effects + self.given:
-            get_effect(name)
-        if self.attitude not in ATTITUDES:
-            raise ValueError(f"attitude: expected one of {list(ATTITUDES)}, got {self.attitude!r}")
-        if self.cv_folds < 2:
-            raise ValueError(f"cv_folds: expected an integer >= 2, got {self.cv_folds}")
-        if not self.cv_block_s > 0:
-            raise ValueError(f"cv_block_s: expected a positive duration in s, got {self.cv_block_s}")
-        if self.navigation not in NAVIGATION_CHOICES:
-            raise ValueError(f"navigation: expected one of {list(NAVIGATION_CHOICES)}, got {self.navigation!r}")
-        if self.max_effects < 1:
-            raise ValueError(f"max_effects: expected an integer >= 1, got {self.max_effects}")
-        if not np.isfinite(self.heldout_z_walk):
-            raise ValueError(f"heldout_z_walk: expected a finite z threshold, got {self.heldout_z_walk}")
-        if not self.min_gain_walk >= 0:
-            raise ValueError(f"min_gain_walk: expected a held-out excess >= 0, got {self.min_gain_walk}")
 
 
 @dataclass
@@ -213,162 +140,6 @@ def _group_sigma(model: GapModel, raw: np.ndarray) -> dict:
         m = (model.row_sigma == i) & (model.mask > 0)
         out[key] = float(np.sqrt(np.mean(raw[m] ** 2))) if m.any() else np.nan
     return out
-
-
-def _folds(model, folds: int, block_s: float) -> np.ndarray:
-    """Fold of every row: each run cut into contiguous blocks of about ``block_s``, dealt to the folds
-    in a shuffled balanced order (seeded: the same every call). Dealt round-robin, a channel sampled
-    every folds x block_s seconds (a GNSS fix every 10 s with 5 folds of 2-s blocks: winriver01) put
-    every one of its rows in one fold, so that fold's model had none of it.
-
-    With a velocity per ping (random walk) the channel groups of one block go to different folds:
-    the reference held out is predicted from the beams at the same pings (and the beams from the
-    reference), never from the prior bridging a hole in every channel at once."""
-    row_run = getattr(model, "row_run", np.zeros(model.times.size, dtype=int))
-    fold_of = np.zeros(model.times.size, dtype=int)
-    for k in np.unique(row_run):
-        rows = row_run == k
-        t = model.times[rows]
-        n_blocks = max(folds, int(round((t.max() - t.min()) / block_s)))
-        edges = np.linspace(t.min(), t.max() + 1e-9, n_blocks + 1)
-        deal = np.random.default_rng(FOLD_SEED + int(k)).permutation(n_blocks) % folds
-        fold_of[rows] = deal[np.clip(np.searchsorted(edges, t, side="right") - 1, 0, n_blocks - 1)]
-    if getattr(model, "random_walk", False):  # each channel group of a block held out in a fold of its own
-        groups = list(dict.fromkeys(k[1] for k in model.sigma_keys))
-        shift = np.array([groups.index(k[1]) for k in model.sigma_keys])[model.row_sigma]
-        fold_of = (fold_of + shift) % folds
-    return fold_of
-
-
-def _cv_residuals(model, fit, folds: int, block_s: float, fold_of: np.ndarray | None = None) -> np.ndarray:
-    """Raw residuals of each held-out fold predicted by the fit with that fold left out.
-
-    The leave-fold-out estimate is one Gauss-Newton step from the full fit, damped by a
-    millionth of the full-data information so a direction only the fold determines stays
-    put. Unknowns pinned or held at a bound are not re-estimated (the step would otherwise
-    follow the bound's pull and fit the held-out data). ``fold_of`` (rows): default time
-    blocks (:func:`_folds`); whole runs for a run hold-out.
-
-    Each prediction is divided by sqrt(1 + h), h = J_row (J_t^T J_t)^-1 J_row^T its leverage
-    (the training fit's uncertainty in units of the noise): a correct model then predicts with
-    unit chi-square whatever its number of unknowns (navigation knots, angles), so the gap
-    measures misfit, not the model's flexibility.
-    """
-    J, cols = free_jacobian(fit)  # a pinned unknown or one at its bound stays put
-    w = model.weights(fit.sigma)
-    e = w * fit.raw
-    fold_of = _folds(model, folds, block_s) if fold_of is None else fold_of
-    pred = leave_out_predictions(J, e, model.mask > 0, fold_of, local=velocity_columns(model, cols))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(w != 0, pred / np.where(w != 0, w, 1.0), 0.0)
-
-
-def _gap_rows(model) -> np.ndarray:
-    """Rows the gap is measured on: the data's (a random-walk prior's motion rows are not data)."""
-    rows = model.mask > 0
-    keys = getattr(model, "sigma_keys", None)
-    if keys is not None:
-        prior = [i for i, k in enumerate(keys) if k[1] in PRIOR_GROUPS]
-        rows = rows & ~np.isin(model.row_sigma, prior)
-    return rows
-
-
-def _gap(model: GapModel, raw: np.ndarray, sigma: dict) -> tuple[float, float]:
-    """Excess chi-square per sample and its z-score against the noise levels.
-
-    With a velocity per ping (random walk) the velocity follows the beams, and what they and the
-    reference disagree on shows in the reference's few rows: the excess is then the mean of the
-    channel groups' excesses (each group one vote, however many rows it has), its z against that
-    mean's null sd sqrt(sum_g 2 / n_g) / G."""
-    m = _gap_rows(model)
-    s = np.array([sigma[k] for k in model.sigma_keys])[model.row_sigma]
-    z2 = (raw / s) ** 2
-    if not getattr(model, "random_walk", False):
-        chi2 = float(np.mean(z2[m]))
-        return chi2 - 1.0, (chi2 - 1.0) * np.sqrt(int(m.sum()) / 2.0)
-    group_names = np.array([k[1] for k in model.sigma_keys])[model.row_sigma]
-    excess, var = [], 0.0
-    for g in dict.fromkeys(group_names[m]):
-        rows = m & (group_names == g)
-        excess.append(float(np.mean(z2[rows])) - 1.0)
-        var += 2.0 / rows.sum()
-    gap = float(np.mean(excess))
-    return gap, gap / (np.sqrt(var) / len(excess))
-
-
-def _covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
-    """Covariance of the scaled unknowns ``index`` (a pinned one or one at its bound: zero),
-    scaled by the fit's chi-square."""
-    index = np.asarray(index, dtype=int)
-    J, cols = free_jacobian(fit)
-    dof = max(int((model.mask > 0).sum()) - cols.size, 1)
-    s2 = 2.0 * fit.objective / dof
-    position = {c: j for j, c in enumerate(cols)}
-    inside = [j for j, i in enumerate(index) if i in position]
-    C = np.zeros((index.size, index.size))
-    if inside:
-        sub = marginal_covariance(J, [position[index[j]] for j in inside], s2)
-        C[np.ix_(inside, inside)] = sub
-    return C
-
-
-def _standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
-    """Standard errors of the unknowns ``index`` in their own units (:func:`_covariance`'s diagonal)."""
-    return np.sqrt(np.maximum(np.diag(_covariance(fit, model, index)), 0)) * fit.scale[index]
-
-
-def _hac_covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
-    """Covariance of the unknowns ``index`` (own units) under coloured residuals: the Newey-West
-    sandwich (:func:`..statistics.hac.sandwich`) over time bins of a ping interval, the priors'
-    rows counted by their expected information. An unknown held at a bound is freed for it: its
-    variance is then what the data would give it near there (a detection limit's scale)."""
-    index = np.asarray(index, dtype=int)
-    if index.size == 0:
-        return np.zeros((0, 0))
-    J = as_sparse(fit.jacobian)
-    free = np.ones(J.shape[1], dtype=bool) if fit.free is None else fit.free.astype(bool).copy()
-    free[index] = True
-    cols = np.flatnonzero(free)
-    scale = fit.scale[index]
-    return hac_of_columns(J[:, cols], np.searchsorted(cols, index), model, fit) * np.outer(scale, scale)
-
-
-def hac_of_columns(J, q, model: GapModel, fit: Fit) -> np.ndarray:
-    """The HAC covariance of columns ``q`` of the weighted-residual Jacobian ``J`` (the model's rows,
-    any columns: the fit's free unknowns, or those and a signature), at the fit's residuals."""
-    P_q = inverse_columns(J, q)
-    used = model.mask > 0
-    e = np.where(used, model.weights(fit.sigma) * fit.raw, 0.0)
-    prior = np.isin(model.row_sigma, [i for i, k in enumerate(model.sigma_keys) if k[1] in PRIOR_GROUPS])
-    rows = used | prior
-    return sandwich(as_sparse(J)[np.flatnonzero(rows)], e[rows], P_q, model.row_run[rows], model.times[rows],
-                    ping_bins([r.case for r in model.base.runs]), known=prior[rows]).cov
-
-
-def _hac_standard_errors(fit: Fit, model: GapModel, index) -> np.ndarray:
-    """Standard errors of the unknowns ``index`` (own units) under coloured residuals (:func:`_hac_covariance`)."""
-    return np.sqrt(np.maximum(np.diag(_hac_covariance(fit, model, index)), 0.0))
-
-
-def coloured_covariance(fit: Fit, model: GapModel, index) -> np.ndarray:
-    """Covariance of the unknowns ``index`` (own units) an estimate is reported with: the HAC one's
-    correlations, each variance at least the white one (coloured residuals never make an unknown
-    better determined than white ones would)."""
-    hac = _hac_covariance(fit, model, index)
-    white = _standard_errors(fit, model, index)
-    out = at_least_white(hac, white ** 2)
-    missing = ~(np.diag(hac) > 0)  # no HAC information (a pinned unknown): the white variance alone
-    out[missing, :] = out[:, missing] = 0.0
-    out[missing, missing] = white[missing] ** 2
-    return out
-
-
-def detection_limits(names: list, se_hac: np.ndarray, n_params: int, n_obs: int, bic_margin: float) -> dict:
-    """Smallest size of each unknown the selection would take: an effect joins when
-    z^2 > k log n + margin under coloured residuals (its coloured BIC gain beyond the margin), so
-    the limit is its HAC standard error times sqrt(k log n + margin)."""
-    factor = np.sqrt(n_params * np.log(n_obs) + bic_margin)
-    return {n: float(s * factor) for n, s in zip(names, se_hac)}
 
 
 def _velocity_error(model: GapModel, fit: Fit) -> float | None:
@@ -571,7 +342,7 @@ def _confounding(model: GapModel, fit: Fit, effect_names: list, against: list, t
     idx_b = [i for i in idx_b if free[i]]
     if not idx_e or not idx_b:
         return [], 0.0
-    C = _covariance(fit, model, idx_e + idx_b)
+    C = covariance(fit, model, idx_e + idx_b)
     ne = len(idx_e)
     Cb = C[ne:, ne:]
     worst, names = 0.0, []
@@ -608,15 +379,15 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
     k = len(model.effect_index) - len(ref_model.effect_index)
     dll = fit.log_likelihood(model) - ref_fit.log_likelihood(ref_model)
     dbic = -2.0 * dll + k * np.log(n_obs)
-    gap_after, _ = _gap(model, cv, noise)
+    gap_after, _ = heldout_gap(model, cv, noise)
     shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
     mine = [n for n in model.effect_names if effect_of(n) == name]
     idx = [model.names.index(n) for n in mine]
     values = {n: float(fit.x[i]) for n, i in zip(mine, idx)}
-    colour = _colour_factor(model, fit, ref_model, ref_fit, noise)
+    colour = colour_factor(model, fit, ref_model, ref_fit, noise)
     # a profile's curvature counts white residuals: its SE widened by the same colour factor as the BIC
-    white = _standard_errors(fit, model, idx)
-    hac = _hac_standard_errors(fit, model, idx)
+    white = standard_errors(fit, model, idx)
+    hac = hac_standard_errors(fit, model, idx)
     limits = detection_limits(mine, np.maximum(hac, white), k, n_obs, config.bic_margin)
     # a free unknown's SE under coloured residuals (never below the white one, as the colour factor is at least 1)
     profiled = {n: v * np.sqrt(colour) for n, v in fit.profile_se.items() if n in mine}
@@ -650,70 +421,6 @@ def at_bounds(effect: str, values: dict, scales: dict | None = None) -> list:
         if min(abs(v - lo), abs(v - hi)) <= tol:
             out.append(name)
     return out
-
-
-def _colour_factor(model: GapModel, fit: Fit, ref_model: GapModel, ref_fit: Fit, noise: dict) -> float:
-    """How much coloured residuals inflate the likelihood ratio of an effect: each data row's
-    contribution to 2 delta_ll, (e_ref / s)^2 - (e / s)^2, summed per time bin (a ping interval)
-    of each run, and the Newey-West long-run variance of that series over its white variance
-    (centred; Bartlett lags by Andrews' AR(1) plug-in; at least 1). A real file's slow wander makes
-    neighbouring bins' gains agree, and 2 delta_ll / factor is then the white-equivalent statistic."""
-    bins = _paired_bins(model, fit.raw, ref_model, ref_fit.raw, noise)
-    if bins is None:
-        return 1.0
-    long_run = white = 0.0
-    for series in bins:
-        series = (series - series.mean())[:, None]
-        lags, _ = andrews_lags(series)
-        long_run += float(newey_west(series, lags)[0, 0])
-        white += float(series[:, 0] @ series[:, 0])
-    return max(long_run / white, 1.0) if white > 0 else 1.0
-
-
-def _paired_bins(model: GapModel, raw: np.ndarray, ref_model: GapModel, ref_raw: np.ndarray, noise: dict,
-                 weights: bool = False) -> list | None:
-    """Per run, the series over time bins (a ping interval) of each data row's (e_ref / s)^2 - (e / s)^2,
-    the reference model's residuals ``ref_raw`` against the model's ``raw`` at the common noise levels;
-    with ``weights`` each row counts 1 / (groups x its group's rows), as :func:`_gap` averages them
-    (the bins then sum to the gap's change). None when the two models' data rows differ."""
-    rows, rows_ref = _gap_rows(model), _gap_rows(ref_model)
-    if rows.sum() != rows_ref.sum():
-        return None
-    s_ref = np.array([noise[k] for k in ref_model.sigma_keys])[ref_model.row_sigma[rows_ref]]
-    s = np.array([noise[k] for k in model.sigma_keys])[model.row_sigma[rows]]
-    d = (ref_raw[rows_ref] / s_ref) ** 2 - (raw[rows] / s) ** 2
-    if weights:
-        group = np.array([k[1] for k in model.sigma_keys])[model.row_sigma[rows]]
-        names, count = np.unique(group, return_counts=True)
-        d = d / (names.size * count[np.searchsorted(names, group)])
-    run, t = model.row_run[rows], model.times[rows]
-    widths = ping_bins([r.case for r in model.base.runs])
-    out = []
-    for r in np.unique(run):
-        m = run == r
-        b = np.floor((t[m] - t[m].min()) / widths[int(r)]).astype(int)
-        out.append(np.bincount(b, weights=d[m])[np.bincount(b) > 0])
-    return out
-
-
-def heldout_improvement_z(model: GapModel, cv: np.ndarray, ref_model: GapModel, ref_cv: np.ndarray, noise: dict) -> float:
-    """How significantly the model predicts the held-out data better than the reference model: the
-    change of the held-out gap (:func:`_gap`'s group-averaged excess) over its standard error, from
-    the per-bin series of the paired row differences with a Newey-West long-run variance (real
-    residuals are coloured). A paired test: it asks whether the effect predicts better, not how
-    much of a gap that may hold other structure it removes (the shrink share)."""
-    if not getattr(model, "random_walk", False):
-        return float("nan")
-    bins = _paired_bins(model, cv, ref_model, ref_cv, noise, weights=True)
-    if bins is None:
-        return float("nan")
-    change = var = 0.0
-    for series in bins:
-        change += float(series.sum())
-        c = (series - series.mean())[:, None]
-        lags, _ = andrews_lags(c)
-        var += float(newey_west(c, lags)[0, 0])  # the long-run variance of the bins' sum
-    return change / np.sqrt(var) if var > 0 else float("nan")
 
 
 # ---------------------------------------------------------------------------- main
@@ -781,7 +488,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     n_obs = int((base_model.mask > 0).sum())
     selected_terms, selected, confounded, ranking, alternatives = [], [], [], [], []
     current_name, current = "base", (base_model, base_fit)
-    cv = {"base": _cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
+    cv = {"base": cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
     given, given_covariance = {}, {}
     if config.given:  # the run's own effects first: every candidate is then judged on top of them
         for name in config.given:
@@ -796,7 +503,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
         fits[current_name] = current
-        cv[current_name] = _cv_residuals(*current, config.cv_folds, config.cv_block_s)
+        cv[current_name] = cv_residuals(*current, config.cv_folds, config.cv_block_s)
         gm, gf = current
         idx = [gm.names.index(n) for n in gm.effect_names]
         cov = coloured_covariance(gf, gm, idx)
@@ -819,7 +526,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
 
         def one(name, terms=tuple(selected_terms), start=current[1]):
             model, f = refit(list(terms), name, start)
-            held_out = _cv_residuals(model, f, config.cv_folds, config.cv_block_s)
+            held_out = cv_residuals(model, f, config.cv_folds, config.cv_block_s)
             if progress:
                 progress(labels[name])
             return model, f, held_out
@@ -840,7 +547,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                     if key[1] not in PRIOR_GROUPS:  # the walk's intensity is the base's, not a floor
                         noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
             noise = {k: max(v, 1e-9) for k, v in noise.items()}
-        ref_gap, _ = _gap(current[0], cv[current_name], noise)
+        ref_gap, _ = heldout_gap(current[0], cv[current_name], noise)
         scores = []
         for name, (label, model, f) in tried.items():
             s = _score(name, model, f, current[0], current[1], ref_gap, cv[label], cv[current_name], noise, n_obs,
@@ -876,11 +583,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         current = fits[current_name]
 
     start_model, start_fit = fits[start_name]
-    gap_before, z_before = _gap(start_model, cv[start_name], noise)
+    gap_before, z_before = heldout_gap(start_model, cv[start_name], noise)
     where = _where(start_model, start_fit, cv[start_name], noise)
     v_before = _velocity_error(start_model, start_fit)
     if selected:
-        gap_after, z_after = _gap(current[0], cv[current_name], noise)
+        gap_after, z_after = heldout_gap(current[0], cv[current_name], noise)
         remaining = z_after > config.gap_z and gap_after > config.min_gap
         verdict = "+".join(selected)
         chosen = [next(s for s in ranking if s.effect == name and s.significant) for name in selected]
@@ -938,8 +645,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     if len(cases) > 1 and selected:
         runs_fold = base_model.row_run.copy()
         for label, (m, f) in (("base", (base_model, base_fit)), (current_name, current)):
-            rv = _cv_residuals(m, f, config.cv_folds, config.cv_block_s, fold_of=runs_fold)
-            run_holdout[label] = _gap(m, rv, noise)[0]
+            rv = cv_residuals(m, f, config.cv_folds, config.cv_block_s, fold_of=runs_fold)
+            run_holdout[label] = heldout_gap(m, rv, noise)[0]
     base_info = {"success": base_fit.success, "status": base_fit.status, "iterations": base_fit.iterations,
                  "attitude_source": ", ".join(dict.fromkeys("samples" if r.attitude_source == "samples" else "model"
                                                             for r in base.runs)),

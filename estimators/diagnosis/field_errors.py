@@ -43,7 +43,7 @@ ERROR_UNKNOWNS = {
 
 def detection_limit(error: str, limits: dict) -> float | None:
     """The smallest size of ``error`` (its own unit) the diagnosis takes on a file, from its catalog
-    effect's per-unknown detection limits (full names -> value, :func:`.diagnose.detection_limits`):
+    effect's per-unknown detection limits (full names -> value, :func:`.covariance.detection_limits`):
     each unknown's limit over its change per unit of the error, the harder of them (a bed: the
     harder of north and east); None where the effect's limit does not bound the error or is missing."""
     names, per_unit, bounded = ERROR_UNKNOWNS.get(error, ((), None, False))

@@ -26,7 +26,9 @@ import numpy as np
 from ...cases.scenario import Scenario, get_scenario
 from ...models.effects import get_effect
 from ...cases.simulation import simulate
-from .diagnose import DiagnosisConfig, _cv_residuals, _gap, diagnose
+from .config import DiagnosisConfig
+from .diagnose import diagnose
+from .heldout import cv_residuals, heldout_gap
 
 NONE = "none"
 SLOW_ATTITUDE = 2.5  # the slower attitude sampling: this many times the platform's interval
@@ -93,8 +95,8 @@ def oracle_shrink(result, label: str, params: dict, config: DiagnosisConfig) -> 
     if fixed is None:
         return None
     pinned = model.solve(fit.x.copy(), fit.sigma, fixed=fixed)
-    cv = _cv_residuals(model, pinned, config.cv_folds, config.cv_block_s)
-    gap, _ = _gap(model, cv, result.noise_levels)
+    cv = cv_residuals(model, pinned, config.cv_folds, config.cv_block_s)
+    gap, _ = heldout_gap(model, cv, result.noise_levels)
     return (result.gap_before - gap) / result.gap_before if result.gap_before > 0 else None
 
 

@@ -13,7 +13,9 @@ import scipy.sparse as sp
 from concurrent.futures import ThreadPoolExecutor
 
 from ...models.effects import get_effect
-from .diagnose import DiagnosisConfig, _terms, applicable, base_from, fit_at_delay, hac_of_columns
+from .config import DiagnosisConfig
+from .covariance import hac_of_columns
+from .diagnose import _terms, applicable, base_from, fit_at_delay
 from .field_errors import FIELD_ERRORS, inject_survey
 from .model import Fit, GapModel, free_jacobian
 from ..statistics.normal_equations import as_sparse, inverse_columns

@@ -138,7 +138,7 @@ def quadratic_diagonal(lu, J: sp.csr_matrix) -> np.ndarray:
 def leave_out_predictions(J, e: np.ndarray, used: np.ndarray, fold_of: np.ndarray, damping: float = 1e-6,
                           local: np.ndarray | None = None) -> np.ndarray:
     """Weighted residuals of each fold predicted with that fold left out, divided by
-    sqrt(1 + leverage): one Gauss-Newton step from the full fit (see ``_cv_residuals``).
+    sqrt(1 + leverage): one Gauss-Newton step from the full fit (see ``diagnosis.heldout.cv_residuals``).
     ``local``: the columns :func:`leverages` may invert by their band."""
     J = as_sparse(J)
     Ju_all = J[np.flatnonzero(used)]
