@@ -140,7 +140,8 @@ def test_compiled_diagnosis_model_equals_the_interpreted_one(cache, monkeypatch)
     """A diagnosis's gap model (base and a catalog effect) with its per-ping models compiled, as
     diagnose builds it, and interpreted: residuals and Jacobian at the same point."""
     from adcpdyn.estimators.diagnosis import model as gap
-    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, base_from
+    from adcpdyn.estimators.diagnosis.base import base_from
+    from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
     from adcpdyn.models.effects import get_effect
 
     sc = get_scenario("diag_boat")

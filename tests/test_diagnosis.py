@@ -527,7 +527,7 @@ def test_reference_delay_profile_holds_the_delay_and_reports_its_curvature():
     """On a random-walk base the reference delay is pinned at its profile's best (never left free to
     the joint fit), inside the searched span, with a positive standard error from the profile; the
     clean simulated run does not name it."""
-    from adcpdyn.estimators.diagnosis.diagnose import REFERENCE_DELAY_SPAN_S
+    from adcpdyn.estimators.diagnosis.profiles import REFERENCE_DELAY_SPAN_S
 
     case = simulate(short_scenario(30.0), seed=3)
     r = diagnose(case, DiagnosisConfig(effects=("reference_latency",), navigation="random_walk"))

@@ -60,7 +60,8 @@ def test_random_walk_likelihood_is_marginal_over_the_velocities():
     from the fit's levels; halving every level adds n_V log 4."""
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
-    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, fit_base
+    from adcpdyn.estimators.diagnosis.base import fit_base
+    from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
     from adcpdyn.estimators.measurement_model import VELOCITY_NAME
 
     sc = get_scenario("diag_boat")
@@ -167,7 +168,8 @@ def test_random_walk_rows_are_velocity_increments_over_root_dt():
     zero, it does not drift up or down), both levels estimated from the data beside the noise levels."""
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
-    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, fit_base
+    from adcpdyn.estimators.diagnosis.base import fit_base
+    from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
 
     sc = get_scenario("diag_boat")
     case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=1)

@@ -71,7 +71,8 @@ def test_the_window_model_fits_differenced_fixes_that_a_point_model_misses():
     """A boat changing speed every 3 s, fixes every 4-6 s with 1 cm/s noise, on the base that follows it
     (a velocity per ping): read as window means the fixes fit at their noise; read as instantaneous
     samples at the windows' middles they misfit by the speed changes inside the windows."""
-    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, fit_base
+    from adcpdyn.estimators.diagnosis.base import fit_base
+    from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
     from adcpdyn.models.navigation import Navigation
 
     sc = get_scenario("diag_boat")

@@ -10,7 +10,8 @@ import pytest
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, base_from, fit_base
+from adcpdyn.estimators.diagnosis.base import base_from, fit_base
+from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
 from adcpdyn.estimators.diagnosis.field_errors import inject
 from adcpdyn.estimators.diagnosis.model import GapModel
 from adcpdyn.estimators.diagnosis.signal_limit import signal_limit, signal_statistic

@@ -10,7 +10,8 @@ from conftest import real
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig, base_from
+from adcpdyn.estimators.diagnosis.base import base_from
+from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
 from adcpdyn.estimators.diagnosis.readings import sound_speed_reading
 from adcpdyn.estimators.diagnosis.field_errors import inject
 from adcpdyn.estimators.diagnosis.model import GapModel

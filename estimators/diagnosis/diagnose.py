@@ -28,7 +28,6 @@ misses, which catalog effects explain it, and how far the held-out gap shrinks.
 from __future__ import annotations
 
 import dataclasses
-import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -38,22 +37,17 @@ from scipy import stats
 from ...cases.case import Case
 from ...models.effects import get_effect
 from ...models.motion import AttitudeParams, evaluate_attitude
-from ..attitude_fit import fit_attitude
-from ..calibration.problem import choose_attitude
 from ..calibration.record import CalibrationRecord
-from ..measurement_model import (EffectTerm, ModelSpec, RunSetup, choose_navigation, course_offset_rad, heading_centre,
-                                 knot_times, ping_knots)
 from . import where as where_mod
 from .readings import sound_speed_reading
-from .model import BOUND_TOL, PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, Pins, free_jacobian, residual_peaks, velocity_columns
-from ..statistics.normal_equations import group_levels, redundancy
+from .model import BOUND_TOL, PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, residual_peaks
 from .config import DiagnosisConfig
 from .covariance import coloured_covariance, covariance, detection_limits, hac_standard_errors, standard_errors
 from .heldout import colour_factor, cv_residuals, heldout_gap, heldout_improvement_z
+from .base import (applicable, effect_of, effect_terms, fit_base, group_sigma, noise_from_data,
+                   pinned_effect_parameters, variance_components, velocity_error)
+from .profiles import REFERENCE_DELAY, delay_profile, fixed_points, marginal_profile
 
-INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "vertical")  # estimated without the model (pre-fit, error velocity, first differences)
-PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
-VCE_ITERATIONS = 3  # variance-component re-estimations of the base (each with a refit)
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
 
@@ -125,214 +119,11 @@ class DiagnosisResult:
 
 
 # ---------------------------------------------------------------------------- numbers
-def effect_of(unknown: str) -> str:
-    """The catalog effect an effect unknown belongs to (``run2/moving_bed.velocity_north_m_s`` -> ``moving_bed``)."""
-    return unknown.split("/")[-1].split(".")[0]
-
-
 def _key_name(model: GapModel, key) -> str:
     return key[1] if model.n_runs == 1 else f"{model.base.runs[key[0]].case.name}/{key[1]}"
 
 
-def _group_sigma(model: GapModel, raw: np.ndarray) -> dict:
-    out = {}
-    for i, key in enumerate(model.sigma_keys):
-        m = (model.row_sigma == i) & (model.mask > 0)
-        out[key] = float(np.sqrt(np.mean(raw[m] ** 2))) if m.any() else np.nan
-    return out
-
-
-def _velocity_error(model: GapModel, fit: Fit) -> float | None:
-    """RMS horizontal error of the per-ping velocity over ground corrected with the fitted model
-    (all runs with a truth)."""
-    errs = []
-    for k, run in enumerate(model.base.runs):
-        truth = run.case.truth
-        if truth is None or truth.vessel_velocity_m_s is None:
-            continue
-        v = model.corrected_velocity(fit, k)
-        err = v[:, :2] - truth.vessel_velocity_m_s[:, :2]
-        errs.append(err[np.all(np.isfinite(err), axis=1)])
-    if not errs or not np.concatenate(errs).size:
-        return None
-    err = np.concatenate(errs)
-    return float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-
-
-# ---------------------------------------------------------------------------- the base
-def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationRecord | None = None) -> DiagnosisBase:
-    """The base of a diagnosis: the runs' attitude and navigation, the calibration's platform
-    quantities pinned (or estimated from the runs), the starting noise levels."""
-    runs, notes = [], []
-    timing = "deep" if calibration and calibration.timing.split(",")[0] in ("deep", "exact") else "shallow"
-    for case in cases:
-        af = fit_attitude(case, max_modes=config.max_modes)
-        own = None if calibration is None else calibration.run_of(case)
-        if own and own.attitude_model is not None:  # this very run was calibrated: its motion model starts the fit
-            af = dataclasses.replace(af, params=own.attitude_model)
-        source, reason = choose_attitude(case, af, config.attitude)
-        navigation = choose_navigation(case, source, config.navigation)
-        knots = ping_knots(case) if navigation == "random_walk" else knot_times(case, None)
-        runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason,
-                             navigation=navigation))
-    head = runs[0].case.attitude.frame == "transducer"
-    moving = any(r.moving_reference for r in runs)
-    v = cases[0].vessel
-    pins, sigma0, moving_bed = {}, {}, "off"
-    installation, nominal, heading, centre = ("head" if head else "estimate" if moving else "fixed"), (0.0, 0.0, 0.0), \
-        ("misalignment" if head and moving else "off"), (0.0, 0.0)
-    if calibration is not None:
-        if not head:
-            installation = "fixed"
-            try:
-                angles, determined = calibration.installation_or_nominal()
-            except ValueError:  # neither calibrated nor configured: level
-                angles, determined = np.zeros(3), False
-            nominal = tuple(float(a) for a in angles)
-            notes.append("installation angles pinned at the calibration's" if determined else
-                         "installation angles not determined by the calibration: its nominal ones are used")
-        d = calibration.heading_misalignment_rad
-        if head and moving and d is not None:
-            deviation = calibration.compass_deviation_rad
-            if deviation is not None and np.all(np.isfinite(deviation)):
-                heading = "deviation"
-                centre = heading_centre(runs)  # re-centre the calibration's correction on these runs' headings
-                b, c, mean_sin, mean_cos = calibration.compass_deviation_applied()
-                d = d + b * (centre[0] - mean_sin) + c * (centre[1] - mean_cos)
-                pins.update({"compass_deviation_sin": b, "compass_deviation_cos": c})
-            pins["heading_misalignment"] = float(d)
-            notes.append("heading misalignment (and deviation) pinned at the calibration's")
-        try:
-            r = calibration.lever_arms_in("transducer" if head else "vessel")
-        except ValueError:  # not in the file, or not determined: estimated from the runs
-            r = None
-        if r is not None:
-            for a, value in zip("xyz", r.mean(axis=0)):
-                pins[f"P_{a}"] = float(value)
-            notes.append("lever arms pinned at the calibration's (head centre)")
-        bed = calibration.moving_bed_velocity_m_s
-        if bed is not None and all(calibration.holds(c) for c in cases) and calibration.moving_bed == "constant":
-            moving_bed = "constant"  # these very runs were calibrated: their bed is the base's
-            pins.update({"moving_bed_north": float(bed[0]), "moving_bed_east": float(bed[1])})
-            notes.append("moving bed pinned at the calibration's (these runs are its own: by name or within its time span)")
-        for k, case in enumerate(cases):  # a calibrated run's transducer depth, as its slant ranges gave it
-            own = calibration.run_of(case)
-            if own and own.transducer_depth_offset_m is not None and runs[k].use_ranges:
-                name = "transducer_depth_offset_m" if len(cases) == 1 else f"run{k + 1}/transducer_depth_offset_m"
-                pins[name] = own.transducer_depth_offset_m
-        for group, value in calibration.noise_sigma.items():
-            if isinstance(value, (int, float)) and value > 0:
-                for k in range(len(runs)):
-                    sigma0[(k, group)] = float(value)
-    spec = ModelSpec(formulation="minimal", lever_box_m=0.5 * v.length_m if v.length_m else 10.0,
-                     installation=installation, nominal_installation_ypr_rad=nominal,
-                     yaw_centre_rad=course_offset_rad(runs) if installation == "estimate" or heading != "off" else 0.0,
-                     heading=heading, moving_bed=moving_bed)
-    for k, run in enumerate(runs):
-        for group, value in run.noise_guess().items():
-            if group in INDEPENDENT_NOISE or (k, group) not in sigma0:
-                sigma0[(k, group)] = value
-    if any(r.random_walk for r in runs):
-        notes.append("vessel velocity at every ping under a random-walk prior, its intensity and the noise levels from "
-                     "the data (variance components)")
-    return DiagnosisBase(runs, spec, Pins(pins, "calibration" if calibration is not None else ""), sigma0, notes)
-
-
-def fit_base(cases, config: DiagnosisConfig, calibration: CalibrationRecord | None = None):
-    """(base, its model, its fit, noise levels): two passes, the noise of the groups without an
-    independent estimate re-estimated from the first."""
-    cases = [cases] if isinstance(cases, Case) else list(cases)
-    base = base_from(cases, config, calibration)
-    model = GapModel(base, solver=config.solver)
-    centre = np.array([base.pins.values.get(f"P_{a}", 0.0) for a in "xyz"])
-    angles = np.array([model.model.spec.yaw_centre_rad, 0.0, 0.0])
-    x0 = model.model.initial_x([r.fit.params for r in base.runs], angles, centre, heading_guess=angles[0])
-    x0 = model.start({**dict(zip(model.names, x0)), **base.pins.values})
-    # installation angles held at their start (the course offset) first, then freed from that optimum: a
-    # misfit the base cannot represent (an effect) must not drive them to their box in the first solve
-    held = {n: float(x0[i]) for i, n in enumerate(model.names) if n.startswith("installation_")}
-    if held:
-        x0 = model.solve(x0, base.sigma0, fixed=held).x
-    fit = model.solve(x0, base.sigma0)
-    sigma = dict(base.sigma0)
-    if model.random_walk:  # a velocity per ping: every noise level and the walk's intensity from the data
-        fit, sigma = _noise_from_data(model, fit)
-        return base, model, fit, sigma
-    rms = _group_sigma(model, fit.raw)
-    for key in model.sigma_keys:
-        if key[1] not in INDEPENDENT_NOISE:
-            sigma[key] = max(rms[key], 1e-6)
-    fit = model.solve(fit.x, sigma)
-    return base, model, fit, sigma
-
-
-def _noise_from_data(model: GapModel, fit: Fit, fixed: dict | None = None) -> tuple:
-    """(fit, noise levels) after :data:`VCE_ITERATIONS` variance-component re-estimations, each with
-    a refit (``fixed``: unknowns held at their values)."""
-    for _ in range(VCE_ITERATIONS):
-        sigma = variance_components(model, fit)
-        fit = model.solve(fit.x, sigma, fixed=fixed)
-    return fit, sigma
-
-
-def variance_components(model: GapModel, fit: Fit) -> dict:
-    """Each (run, group)'s noise level from the fit's residuals over their redundancy (Helmert /
-    Foerstner variance-component estimation: sigma_g^2 = e_g^T e_g / (n_g - sum of the group's
-    leverages)); the random walk's intensity is one of them (REML for a linear-Gaussian walk)."""
-    J, cols = free_jacobian(fit)
-    used = model.mask > 0
-    r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=velocity_columns(model, cols))
-    return group_levels(fit.raw, model.row_sigma, used, model.sigma_keys, r, fit.sigma)
-
-
 # ---------------------------------------------------------------------------- which effects
-def applicable(base: DiagnosisBase, name: str) -> tuple[bool, str]:
-    """Whether an effect can be tried on top of this base, and why not."""
-    e = get_effect(name)
-    if base.sampled and e.needs_motion_model:
-        return False, "acts on the motion model only; the beams use the sensor's samples (which hold it already)"
-    moving = any(r.moving_reference for r in base.runs)
-    stationary = all(r.knots is None for r in base.runs)  # the vessel is known to stay put
-    if name == "moving_bed" and not moving and not stationary:
-        return False, "a moving bed is indistinguishable from vessel motion without a reference"
-    if e.needs_reference and not moving and not (name == "moving_bed" and stationary):
-        return False, "needs a moving reference velocity"
-    if name == "surge" and not stationary:  # a run held still (the pool) has no navigation to follow a surge
-        how = ("a velocity at every ping" if any(r.random_walk for r in base.runs)
-               else "a piecewise-linear velocity")
-        return False, f"part of the base: its navigation ({how} through the reference or bottom track) follows speed changes"
-    if name == "forced_roll":
-        return False, ("part of the base: its motion model's modes may be steady (wave-forced), as the calibration's; an "
-                       "oscillation it misses shows as a gap at its frequency")
-    if name == "installation_misalignment" and base.spec.installation == "estimate":
-        return False, "part of the base: the installation angles are estimated against the moving reference"
-    if name == "installation_misalignment" and base.spec.installation == "head":
-        return False, ("not observable: a sensor inside the head turns with the head, so the beams' attitude does not "
-                       "depend on how the head sits in the vessel (notes on the paper, erratum 5); its heading against "
-                       "the reference is the base's heading misalignment")
-    if name == "compass_offset" and base.spec.heading != "off" and "heading_misalignment" not in base.pins.values:
-        return False, "part of the base: the heading misalignment it estimates against the reference is a constant heading error"
-    if name == "deep_water_timing" and base.runs[0].timing != "shallow":
-        return False, "part of the base: the calibration's two-way timing"
-    return True, ""
-
-
-def _terms(base: DiagnosisBase, name: str) -> list:
-    """The model terms of one effect: shared by all runs, or one per run for per-run effects."""
-    e = get_effect(name)
-    if name in PER_RUN_EFFECTS and len(base.runs) > 1:
-        return [EffectTerm(e, k) for k in range(len(base.runs))]
-    return [EffectTerm(e)]
-
-
-def _pinned_effect_parameters(model: GapModel, base: DiagnosisBase) -> dict:
-    """Effect unknowns the base already carries: the compass's constant against a free misalignment."""
-    out = {}
-    if base.spec.heading != "off" and "heading_misalignment" not in base.pins.values:
-        out.update({n: 0.0 for n in model.effect_names if n.endswith("compass_deviation.A_rad")})
-    return out
-
-
 def _confounding(model: GapModel, fit: Fit, effect_names: list, against: list, threshold: float) -> tuple[list, float]:
     """Unknowns in ``against`` that share more than ``threshold`` of the effect parameters' variance."""
     idx_e = [model.names.index(n) for n in effect_names]
@@ -401,7 +192,7 @@ def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_o
         p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else float("nan"),
         at_bound=at_bounds(name, values, {n: float(model.scale[i]) for n, i in zip(mine, idx)}), n_params=k, params=values,
         params_se={n: float(e) for n, e in se.items()}, detection_limit=limits, gap_after=float(gap_after),
-        shrink_fraction=float(shrink), velocity_error_m_s=_velocity_error(model, fit), success=fit.success,
+        shrink_fraction=float(shrink), velocity_error_m_s=velocity_error(model, fit), success=fit.success,
         status=fit.status, iterations=fit.iterations, round=round_,
         heldout_z=heldout_improvement_z(model, cv, ref_model, ref_cv, noise))
 
@@ -458,30 +249,30 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     profile_hints = {}  # a velocity scale's maximum and SE from its last profile
 
     def refit(selected_terms, name, start_fit):
-        terms = selected_terms + _terms(base, name)
+        terms = selected_terms + effect_terms(base, name)
         values = start_fit.values
         if base_model.random_walk and any(t.effect.name == "reference_latency" for t in terms):
-            return _delay_profile(base, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
+            return delay_profile(base, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
         model = GapModel(base, terms, peaks, solver=config.solver)
-        pinned = _pinned_effect_parameters(model, base)
+        pinned = pinned_effect_parameters(model, base)
         if base_model.random_walk:  # unknowns that scale the velocities: by the marginal likelihood, held where it put them
             scaled = [n for n in model.names if n.endswith(VELOCITY_SCALES)]
             mine = [n for n in scaled if effect_of(n) == name]
             pinned.update({n: float(values[n]) for n in scaled if n not in mine and n in values})
             if len(mine) == 1:  # started about an earlier round's maximum, where there is one
-                model, fit = _marginal_profile(model, mine[0], values, start_fit.sigma, pinned, config, terms, peaks,
+                model, fit = marginal_profile(model, mine[0], values, start_fit.sigma, pinned, config, terms, peaks,
                                                profile_hints.get(mine[0]))
                 if np.isfinite(fit.profile_se[mine[0]]):
                     profile_hints[mine[0]] = (float(fit.x[model.names.index(mine[0])]), fit.profile_se[mine[0]])
                 return model, fit
-        extra = [o for t in _terms(base, name) for o in t.effect.extra_starts()]
+        extra = [o for t in effect_terms(base, name) for o in t.effect.extra_starts()]
         starts = [model.start(values)] + [model.start(values, _renamed(model, o)) for o in extra]
         best = None
         for x0 in starts:
             f = model.solve(x0, start_fit.sigma, fixed=pinned)
             if best is None or f.objective < best.objective:
                 best = f
-        return _fixed_points(base, terms, peaks, config, model, best, pinned)
+        return fixed_points(base, terms, peaks, config, model, best, pinned)
 
     # round 1: every candidate against the base (the ranking); later rounds: on top of the chosen ones
     noise = dict(sigma_fit)
@@ -493,12 +284,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     if config.given:  # the run's own effects first: every candidate is then judged on top of them
         for name in config.given:
             current = refit(selected_terms, name, current[1])
-            selected_terms += _terms(base, name)
+            selected_terms += effect_terms(base, name)
         if current[0].random_walk:  # the noise levels of the model the candidates are judged against: its own
             gm, gf = current
             held = {n: float(gf.x[gm.names.index(n)]) for n in gm.names if n.endswith(REFERENCE_DELAY)}  # at its profile's best
             profile_se = gf.profile_se
-            gf, noise = _noise_from_data(gm, gf, fixed={**_pinned_effect_parameters(gm, base), **held})
+            gf, noise = noise_from_data(gm, gf, fixed={**pinned_effect_parameters(gm, base), **held})
             gf.profile_se = profile_se
             current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
@@ -542,7 +333,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             cv[labels[name]] = held_out
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
             for model, f in [v[1:] for v in tried.values()] + [fits[start_name]]:
-                levels = variance_components(model, f) if model.random_walk else _group_sigma(model, f.raw)
+                levels = variance_components(model, f) if model.random_walk else group_sigma(model, f.raw)
                 for key, value in levels.items():
                     if key[1] not in PRIOR_GROUPS:  # the walk's intensity is the base's, not a floor
                         noise[key] = min(noise[key], value) if np.isfinite(value) else noise[key]
@@ -578,14 +369,14 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                                  "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
                                                    "gap_after": s.gap_after, **_reading_of(s, cases)} for s in close]})
         selected.append(best.effect)
-        selected_terms += _terms(base, best.effect)
+        selected_terms += effect_terms(base, best.effect)
         current_name = tried[best.effect][0]
         current = fits[current_name]
 
     start_model, start_fit = fits[start_name]
     gap_before, z_before = heldout_gap(start_model, cv[start_name], noise)
     where = _where(start_model, start_fit, cv[start_name], noise)
-    v_before = _velocity_error(start_model, start_fit)
+    v_before = velocity_error(start_model, start_fit)
     if selected:
         gap_after, z_after = heldout_gap(current[0], cv[current_name], noise)
         remaining = z_after > config.gap_z and gap_after > config.min_gap
@@ -602,7 +393,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                           f"{gap_after:.3f}, z = {z_after:.1f}), worst in {after[0]['channel']} ({after[0]['detail']}): "
                           "an effect outside the catalog, or more than the catalog's"
                           + _not_the_base(current[0]))
-        v_after = _velocity_error(*current)
+        v_after = velocity_error(*current)
     else:
         gap_after, z_after, verdict = gap_before, z_before, "none"
         remaining = z_before > config.gap_z and gap_before > config.min_gap
@@ -762,168 +553,8 @@ def preference(scores: list, gain, bic_margin: float) -> list:
     return significant + sorted((s for s in scores if not s.significant), key=gain)
 
 
-LATENCY_ITERATIONS = 3
 ALTERNATIVE_SHARE = 0.8  # a significant effect removing this share of the chosen one's shrink is named beside it
-SAMPLE_FIXED_POINTS = {"attitude_latency.delay_s": "sample_shift_s", "tilt_lowpass.tau_s": "sample_tilt_lead_s"}
-REFERENCE_FIXED_POINTS = {"reference_latency.delay_s": "reference_shift_s"}
-
-
-def _fixed_points(base, terms, peaks, config, model, fit, pinned):
-    """Delays re-centred and the fit repeated to a fixed point, so no expansion reaches far.
-    On the sensor's samples each row's segment is taken about t + the current attitude latency,
-    its tilts low-pass-inverted with the current tau (angle and rate from the spline:
-    x = y + tau y', x' = y' + tau y''); the reference rows take the navigation at t - the current
-    reference latency. Without such an effect the fit is returned as it is."""
-    points = {**(SAMPLE_FIXED_POINTS if base.sampled else {}), **REFERENCE_FIXED_POINTS}
-    names = {field: n for key, field in points.items() for n in model.names if n.endswith(key)}
-    if all(n in pinned for n in names.values()):  # a delay held (a profile's) is where its model is exact already
-        return model, fit
-    for _ in range(LATENCY_ITERATIONS if names else 0):
-        values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
-        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])
-        model = GapModel(shifted, terms, peaks, solver=config.solver)
-        new = model.solve(model.start(fit.values), fit.sigma, fixed=pinned)
-        moved = max(abs(float(new.x[model.names.index(n)]) - values[field]) for field, n in names.items())
-        fit = new
-        if moved < 1e-3:
-            break
-    return model, fit
-
-
-def held_at_delay(model: GapModel, key: str, d: float) -> dict:
-    """The unknowns a model exact at delay ``d`` holds: the unknown ending in ``key`` at ``d``, and the
-    effect unknowns the base already carries (:func:`_pinned_effect_parameters`)."""
-    return {**_pinned_effect_parameters(model, model.base), next(n for n in model.names if n.endswith(key)): float(d)}
-
-
-def fit_at_delay(base, terms, peaks, config, field: str, key: str, d: float, x: dict, sigma: dict):
-    """(model, fit) exact at delay ``d``: every run's ``field`` (``reference_shift_s``, ``sample_shift_s``)
-    set to it, the unknown ending in ``key`` pinned there, the fit started from ``x``."""
-    shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **{field: float(d)}) for r in base.runs])
-    model = GapModel(shifted, terms, peaks, solver=config.solver)
-    return model, model.solve(model.start(x), sigma, fixed=held_at_delay(model, key, d))
-
-
-REFERENCE_DELAY_SPAN_S = 3.0  # the reference delays a random-walk base's profile searches, +- (s)
-REFERENCE_DELAY = "reference_latency.delay_s"
-
-
-def _delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile: bool):
-    """A reference delay on a velocity per ping, by the likelihood marginal over the velocities: each
-    model is exact at its delay (the reference rows taken at t - d, the delay pinned there), since the
-    joint fit the NLP minimises prefers the reference samples on the pings' knots (0.38 s on clean
-    winriver02, where the marginal is highest at 0). With ``profile``: a grid of one ping interval
-    over +- :data:`REFERENCE_DELAY_SPAN_S`, then half and a quarter of one about the best, then the
-    vertex of a parabola through the points within two intervals of it, whose curvature gives the
-    standard error (``Fit.profile_se``; NaN at the span's edge or where the parabola does not curve
-    down). The marginal profile keeps a ripple at the ping interval where the reference samples sit
-    on the pings (RiverPro: +-30 in log-likelihood; a piecewise-linear path has no bridge variance
-    between its knots): the estimate is then drawn to the delays that keep them there. Without
-    ``profile``: held where ``values`` (the chosen model's) put it."""
-
-    def at(d: float, x: dict):
-        return fit_at_delay(base, terms, peaks, config, "reference_shift_s", REFERENCE_DELAY, d, x, sigma)
-
-    def settled(model: GapModel, fit: Fit, d: float):  # the attitude's delays, if any, to their fixed point
-        return _fixed_points(model.base, terms, peaks, config, model, fit, held_at_delay(model, REFERENCE_DELAY, d))
-
-    if not profile:
-        d = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY))
-        return settled(*at(d, values), d)
-    step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
-    tried, marginal, kept = {}, {}, {}  # each delay's fit and marginal; the model of the best delay only
-    lock = threading.Lock()
-
-    def visit(d: float, x: dict) -> None:
-        model, fit = at(d, x)
-        with lock:
-            tried[d], marginal[d] = fit, fit.log_likelihood(model)
-            if not kept or marginal[d] > marginal[next(iter(kept))]:  # one expanded problem held, not one per delay
-                kept.clear()
-                kept[d] = model
-
-    def side(delays: list) -> None:  # each side warm-started from its neighbour, the first from the given values
-        x = values
-        for d in delays:
-            visit(d, x)
-            x = tried[d].values
-
-    ll = marginal.__getitem__
-    sides = (np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist(),
-             (-np.arange(step, REFERENCE_DELAY_SPAN_S + 1e-9, step)).tolist())
-    with ThreadPoolExecutor(max_workers=2) as pool:  # the two sides at once (CasADi lets go of Python's lock)
-        list(pool.map(side, sides))
-    for h in (step / 2, step / 4):
-        best = max(tried, key=ll)
-        for d in (best - h, best + h):
-            if abs(d) <= REFERENCE_DELAY_SPAN_S + 1e-9 and d not in tried:
-                visit(d, tried[best].values)
-    best = max(tried, key=ll)
-    near = sorted(d for d in tried if abs(d - best) <= 2 * step + 1e-9)  # two intervals: past the ping-scale ripple
-    curvature, slope, _ = np.polyfit(np.array(near) - best, [ll(d) for d in near], 2) if len(near) >= 3 else (0.0, 0.0, 0.0)
-    if curvature < 0:  # the parabola's vertex, within the last refinement's reach
-        vertex = best + float(np.clip(-slope / (2 * curvature), -step / 4, step / 4))
-        if vertex not in tried and abs(vertex) <= REFERENCE_DELAY_SPAN_S:
-            visit(vertex, tried[best].values)
-            best = max(tried, key=ll)
-    best = best if best in kept else next(iter(kept))  # a tie: the delay whose model was kept
-    edge = best in (min(tried), max(tried))  # the profile may rise beyond the span
-    model, fit = settled(kept[best], tried[best], best)
-    name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
-    fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
-    return model, fit
-
-
 VELOCITY_SCALES = ("sound_speed_error.relative_error", "beam_angle_error.error_rad")  # unknowns scaling the beams' velocities
-PROFILE_REFINEMENTS = 3
-PROFILE_SE_SHARE = 0.25  # the profile's maximum located to this share of its SE
-
-
-def _marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pinned: dict, config: DiagnosisConfig,
-                      terms: list, peaks, around: tuple | None = None):
-    """(model, fit) at the maximum of the likelihood marginal over the per-ping velocities in the
-    unknown ``name``, which scales the velocities the beams see (a sound speed, a beam angle): the
-    joint fit the NLP minimises rewards a smaller velocity path, whose walk's rows shrink (winriver01,
-    recorded at sea with a salinity setting of 0 ppt: the joint fit puts the sound speed 3.7 % low, the
-    marginal 2.8 % high, the salinity's error). Each point is a fit with the unknown held; parabolas
-    through the three points nearest the best, from 0 and +- the unknown's scale (or ``around``: an
-    earlier profile's maximum and SE, the first points there and +- the SE), then at each vertex
-    until it moves by less than :data:`PROFILE_SE_SHARE` of the SE, give the maximum, and the last
-    one's curvature its standard error (``Fit.profile_se``; NaN where it does not curve down); the
-    model at the maximum is taken to its delays' fixed point (:func:`_fixed_points`)."""
-    i = model.names.index(name)
-    lo, hi, step = float(model.lbx[i]), float(model.ubx[i]), float(model.scale[i])
-    fits = {}
-
-    def visit(v: float) -> None:
-        v = float(np.clip(v, lo, hi))
-        if v not in fits:
-            near = min(fits, key=lambda u: abs(u - v)) if fits else None
-            x = fits[near][0].values if near is not None else values
-            f = model.solve(model.start(x, {name: v}), sigma, fixed={**pinned, name: v})
-            fits[v] = (f, f.log_likelihood(model))
-
-    def parabola():  # through the three points nearest the best: (best, curvature, slope, their width)
-        best = max(fits, key=lambda u: fits[u][1])
-        three = sorted(sorted(fits, key=lambda u: abs(u - best))[:3])
-        curvature, slope, _ = np.polyfit(np.array(three) - best, [fits[u][1] for u in three], 2)
-        return best, curvature, slope, max(three) - min(three)
-
-    centre, half = around if around is not None else (0.0, step)
-    half = max(half, 0.1 * step)
-    for v in (centre, centre - half, centre + half):
-        visit(v)
-    for _ in range(PROFILE_REFINEMENTS):
-        best, curvature, slope, width = parabola()
-        vertex = best + (float(np.clip(-slope / (2 * curvature), -width, width)) if curvature < 0 else
-                         float(np.sign(slope) * width))  # no maximum between them: walk on up the slope
-        if curvature < 0 and abs(vertex - best) < PROFILE_SE_SHARE / np.sqrt(-2.0 * curvature):
-            break  # the maximum is located well within its standard error
-        visit(vertex)
-    best, curvature, _, _ = parabola()
-    model, fit = _fixed_points(model.base, terms, peaks, config, model, fits[best][0], {**pinned, name: best})
-    fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 else float("nan")}
-    return model, fit
 
 
 def _not_the_base(model: GapModel) -> str:

@@ -16,8 +16,9 @@ import numpy as np
 from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
 from ...models.effects import get_effect
+from .base import effect_of
 from .config import DiagnosisConfig
-from .diagnose import diagnose, effect_of
+from .diagnose import diagnose
 from ..measurement_model import has_moving_reference
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey, shift_signature
 from .signal_limit import own_delay_profile, signal_limit

@@ -13,11 +13,12 @@ import scipy.sparse as sp
 from concurrent.futures import ThreadPoolExecutor
 
 from ...models.effects import get_effect
+from .base import applicable, base_from, effect_terms
 from .config import DiagnosisConfig
 from .covariance import hac_of_columns
-from .diagnose import _terms, applicable, base_from, fit_at_delay
 from .field_errors import FIELD_ERRORS, inject_survey
 from .model import Fit, GapModel, free_jacobian
+from .profiles import fit_at_delay
 from ..statistics.normal_equations import as_sparse, inverse_columns
 
 SEARCH = (1.0 / 16.0, 4.0)  # sizes searched: from the smallest typical one over 16 to the largest times 4
@@ -104,7 +105,7 @@ def own_delay_profile(model: GapModel, fit: Fit, config: DiagnosisConfig) -> dic
     base = model.base
     if not base.sampled or not applicable(base, "attitude_latency")[0]:
         return None
-    terms = _terms(base, "attitude_latency")  # its refits seed no frequency: no residual peaks needed
+    terms = effect_terms(base, "attitude_latency")  # its refits seed no frequency: no residual peaks needed
     bound = next(p for p in get_effect("attitude_latency").parameters if p.name == "delay_s")
     delays = np.round(np.arange(bound.lower, bound.upper + 1e-9, DELAY_STEP_S), 6)
     base_ll = fit.log_likelihood(model)

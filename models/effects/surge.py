@@ -4,7 +4,7 @@ reads may sit off the bow by the installation, so the direction is the data's, n
 
 Modelled only where the base has no navigation to follow it (a run held still, the pool: a
 moored boat surging on a seiche or on its lines); on a run under way the base's velocity
-through the reference or bottom track follows speed changes (``diagnose.applicable``). The
+through the reference or bottom track follows speed changes (``diagnosis.base.applicable``). The
 frequency is seeded by the strongest peak of the base's horizontal bottom-track residuals.
 """
 

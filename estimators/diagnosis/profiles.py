@@ -1,0 +1,183 @@
+"""Fits whose delay or velocity scale is settled outside the NLP's joint minimum.
+
+Delays (attitude latency, tilt low-pass, reference latency) are re-centred and the fit repeated
+to a fixed point (:func:`fixed_points`), so no expansion reaches far. On a velocity per ping
+(random walk) the joint fit the NLP minimises is biased for unknowns that trade against the
+velocities (a reference delay drawn to the pings' knots, a sound speed or beam angle that shrinks
+the velocity path): they are read from the likelihood marginal over the velocities instead, by
+profiles whose curvature gives their standard errors (:func:`delay_profile`,
+:func:`marginal_profile`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .base import pinned_effect_parameters
+from .config import DiagnosisConfig
+from .model import Fit, GapModel
+
+LATENCY_ITERATIONS = 3
+SAMPLE_FIXED_POINTS = {"attitude_latency.delay_s": "sample_shift_s", "tilt_lowpass.tau_s": "sample_tilt_lead_s"}
+REFERENCE_FIXED_POINTS = {"reference_latency.delay_s": "reference_shift_s"}
+
+
+def fixed_points(base, terms, peaks, config, model, fit, pinned):
+    """Delays re-centred and the fit repeated to a fixed point, so no expansion reaches far.
+    On the sensor's samples each row's segment is taken about t + the current attitude latency,
+    its tilts low-pass-inverted with the current tau (angle and rate from the spline:
+    x = y + tau y', x' = y' + tau y''); the reference rows take the navigation at t - the current
+    reference latency. Without such an effect the fit is returned as it is."""
+    points = {**(SAMPLE_FIXED_POINTS if base.sampled else {}), **REFERENCE_FIXED_POINTS}
+    names = {field: n for key, field in points.items() for n in model.names if n.endswith(key)}
+    if all(n in pinned for n in names.values()):  # a delay held (a profile's) is where its model is exact already
+        return model, fit
+    for _ in range(LATENCY_ITERATIONS if names else 0):
+        values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
+        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])
+        model = GapModel(shifted, terms, peaks, solver=config.solver)
+        new = model.solve(model.start(fit.values), fit.sigma, fixed=pinned)
+        moved = max(abs(float(new.x[model.names.index(n)]) - values[field]) for field, n in names.items())
+        fit = new
+        if moved < 1e-3:
+            break
+    return model, fit
+
+
+def held_at_delay(model: GapModel, key: str, d: float) -> dict:
+    """The unknowns a model exact at delay ``d`` holds: the unknown ending in ``key`` at ``d``, and the
+    effect unknowns the base already carries (:func:`.base.pinned_effect_parameters`)."""
+    return {**pinned_effect_parameters(model, model.base), next(n for n in model.names if n.endswith(key)): float(d)}
+
+
+def fit_at_delay(base, terms, peaks, config, field: str, key: str, d: float, x: dict, sigma: dict):
+    """(model, fit) exact at delay ``d``: every run's ``field`` (``reference_shift_s``, ``sample_shift_s``)
+    set to it, the unknown ending in ``key`` pinned there, the fit started from ``x``."""
+    shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **{field: float(d)}) for r in base.runs])
+    model = GapModel(shifted, terms, peaks, solver=config.solver)
+    return model, model.solve(model.start(x), sigma, fixed=held_at_delay(model, key, d))
+
+
+REFERENCE_DELAY_SPAN_S = 3.0  # the reference delays a random-walk base's profile searches, +- (s)
+REFERENCE_DELAY = "reference_latency.delay_s"
+
+
+def delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile: bool):
+    """A reference delay on a velocity per ping, by the likelihood marginal over the velocities: each
+    model is exact at its delay (the reference rows taken at t - d, the delay pinned there), since the
+    joint fit the NLP minimises prefers the reference samples on the pings' knots (0.38 s on clean
+    winriver02, where the marginal is highest at 0). With ``profile``: a grid of one ping interval
+    over +- :data:`REFERENCE_DELAY_SPAN_S`, then half and a quarter of one about the best, then the
+    vertex of a parabola through the points within two intervals of it, whose curvature gives the
+    standard error (``Fit.profile_se``; NaN at the span's edge or where the parabola does not curve
+    down). The marginal profile keeps a ripple at the ping interval where the reference samples sit
+    on the pings (RiverPro: +-30 in log-likelihood; a piecewise-linear path has no bridge variance
+    between its knots): the estimate is then drawn to the delays that keep them there. Without
+    ``profile``: held where ``values`` (the chosen model's) put it."""
+
+    def at(d: float, x: dict):
+        return fit_at_delay(base, terms, peaks, config, "reference_shift_s", REFERENCE_DELAY, d, x, sigma)
+
+    def settled(model: GapModel, fit: Fit, d: float):  # the attitude's delays, if any, to their fixed point
+        return fixed_points(model.base, terms, peaks, config, model, fit, held_at_delay(model, REFERENCE_DELAY, d))
+
+    if not profile:
+        d = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY))
+        return settled(*at(d, values), d)
+    step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
+    tried, marginal, kept = {}, {}, {}  # each delay's fit and marginal; the model of the best delay only
+    lock = threading.Lock()
+
+    def visit(d: float, x: dict) -> None:
+        model, fit = at(d, x)
+        with lock:
+            tried[d], marginal[d] = fit, fit.log_likelihood(model)
+            if not kept or marginal[d] > marginal[next(iter(kept))]:  # one expanded problem held, not one per delay
+                kept.clear()
+                kept[d] = model
+
+    def side(delays: list) -> None:  # each side warm-started from its neighbour, the first from the given values
+        x = values
+        for d in delays:
+            visit(d, x)
+            x = tried[d].values
+
+    ll = marginal.__getitem__
+    sides = (np.arange(0.0, REFERENCE_DELAY_SPAN_S + 1e-9, step).tolist(),
+             (-np.arange(step, REFERENCE_DELAY_SPAN_S + 1e-9, step)).tolist())
+    with ThreadPoolExecutor(max_workers=2) as pool:  # the two sides at once (CasADi lets go of Python's lock)
+        list(pool.map(side, sides))
+    for h in (step / 2, step / 4):
+        best = max(tried, key=ll)
+        for d in (best - h, best + h):
+            if abs(d) <= REFERENCE_DELAY_SPAN_S + 1e-9 and d not in tried:
+                visit(d, tried[best].values)
+    best = max(tried, key=ll)
+    near = sorted(d for d in tried if abs(d - best) <= 2 * step + 1e-9)  # two intervals: past the ping-scale ripple
+    curvature, slope, _ = np.polyfit(np.array(near) - best, [ll(d) for d in near], 2) if len(near) >= 3 else (0.0, 0.0, 0.0)
+    if curvature < 0:  # the parabola's vertex, within the last refinement's reach
+        vertex = best + float(np.clip(-slope / (2 * curvature), -step / 4, step / 4))
+        if vertex not in tried and abs(vertex) <= REFERENCE_DELAY_SPAN_S:
+            visit(vertex, tried[best].values)
+            best = max(tried, key=ll)
+    best = best if best in kept else next(iter(kept))  # a tie: the delay whose model was kept
+    edge = best in (min(tried), max(tried))  # the profile may rise beyond the span
+    model, fit = settled(kept[best], tried[best], best)
+    name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
+    fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
+    return model, fit
+
+
+PROFILE_REFINEMENTS = 3
+PROFILE_SE_SHARE = 0.25  # the profile's maximum located to this share of its SE
+
+
+def marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pinned: dict, config: DiagnosisConfig,
+                      terms: list, peaks, around: tuple | None = None):
+    """(model, fit) at the maximum of the likelihood marginal over the per-ping velocities in the
+    unknown ``name``, which scales the velocities the beams see (a sound speed, a beam angle): the
+    joint fit the NLP minimises rewards a smaller velocity path, whose walk's rows shrink (winriver01,
+    recorded at sea with a salinity setting of 0 ppt: the joint fit puts the sound speed 3.7 % low, the
+    marginal 2.8 % high, the salinity's error). Each point is a fit with the unknown held; parabolas
+    through the three points nearest the best, from 0 and +- the unknown's scale (or ``around``: an
+    earlier profile's maximum and SE, the first points there and +- the SE), then at each vertex
+    until it moves by less than :data:`PROFILE_SE_SHARE` of the SE, give the maximum, and the last
+    one's curvature its standard error (``Fit.profile_se``; NaN where it does not curve down); the
+    model at the maximum is taken to its delays' fixed point (:func:`fixed_points`)."""
+    i = model.names.index(name)
+    lo, hi, step = float(model.lbx[i]), float(model.ubx[i]), float(model.scale[i])
+    fits = {}
+
+    def visit(v: float) -> None:
+        v = float(np.clip(v, lo, hi))
+        if v not in fits:
+            near = min(fits, key=lambda u: abs(u - v)) if fits else None
+            x = fits[near][0].values if near is not None else values
+            f = model.solve(model.start(x, {name: v}), sigma, fixed={**pinned, name: v})
+            fits[v] = (f, f.log_likelihood(model))
+
+    def parabola():  # through the three points nearest the best: (best, curvature, slope, their width)
+        best = max(fits, key=lambda u: fits[u][1])
+        three = sorted(sorted(fits, key=lambda u: abs(u - best))[:3])
+        curvature, slope, _ = np.polyfit(np.array(three) - best, [fits[u][1] for u in three], 2)
+        return best, curvature, slope, max(three) - min(three)
+
+    centre, half = around if around is not None else (0.0, step)
+    half = max(half, 0.1 * step)
+    for v in (centre, centre - half, centre + half):
+        visit(v)
+    for _ in range(PROFILE_REFINEMENTS):
+        best, curvature, slope, width = parabola()
+        vertex = best + (float(np.clip(-slope / (2 * curvature), -width, width)) if curvature < 0 else
+                         float(np.sign(slope) * width))  # no maximum between them: walk on up the slope
+        if curvature < 0 and abs(vertex - best) < PROFILE_SE_SHARE / np.sqrt(-2.0 * curvature):
+            break  # the maximum is located well within its standard error
+        visit(vertex)
+    best, curvature, _, _ = parabola()
+    model, fit = fixed_points(model.base, terms, peaks, config, model, fits[best][0], {**pinned, name: best})
+    fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 else float("nan")}
+    return model, fit
