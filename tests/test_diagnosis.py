@@ -162,7 +162,7 @@ def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
     offset or bed named there may be the two bases reading the same data apart, and the statement says
     so with its size and the option that removes the doubt; nothing is said for other runs, the same
     base, effects the calibration does not fit, or a record without the runs' navigation."""
-    from adcpdyn.estimators.diagnosis.diagnose import calibration_base_note
+    from adcpdyn.estimators.diagnosis.statement import calibration_base_note
 
     def record(nav, se=np.radians(2.9)):
         run = SimpleNamespace(case="a", navigation=nav)
@@ -421,7 +421,7 @@ def test_candidates_refitted_in_threads_give_the_same_report():
 
 
 def _score(effect, shrink, bic, significant=True):
-    from adcpdyn.estimators.diagnosis.diagnose import EffectScore
+    from adcpdyn.estimators.diagnosis.selection import EffectScore
 
     return EffectScore(effect=effect, delta_ll=0.0, delta_bic=bic, p_value=0.0, n_params=1, params={}, params_se={},
                        gap_after=0.0, shrink_fraction=shrink, velocity_error_m_s=None, success=True, status="",
@@ -429,7 +429,7 @@ def _score(effect, shrink, bic, significant=True):
 
 
 def test_preference_takes_the_best_held_out_prediction_among_the_significant():
-    from adcpdyn.estimators.diagnosis.diagnose import preference
+    from adcpdyn.estimators.diagnosis.selection import preference
 
     scores = [_score("compass_offset", 0.24, -32.0), _score("moving_bed", 0.33, -27.0),
               _score("heave", 0.50, -5.0, significant=False)]
@@ -440,7 +440,7 @@ def test_preference_takes_the_best_held_out_prediction_among_the_significant():
 def test_preference_breaks_a_tie_of_held_out_shrinks_by_the_bic():
     """Shrinks within SHRINK_TIE predict alike (a sound-speed scale and a bed on one straight course:
     0.9533 vs 0.9477): the better coloured BIC is named; a clearly better prediction still wins."""
-    from adcpdyn.estimators.diagnosis.diagnose import SHRINK_TIE, preference
+    from adcpdyn.estimators.diagnosis.selection import SHRINK_TIE, preference
 
     gain = lambda s: s.delta_bic_hac  # noqa: E731
     tie = [_score("moving_bed", 0.9533, -208.0), _score("sound_speed_error", 0.9533 - 0.5 * SHRINK_TIE, -213.8)]
@@ -450,7 +450,7 @@ def test_preference_breaks_a_tie_of_held_out_shrinks_by_the_bic():
 
 
 def test_preference_keeps_the_nested_effect_unless_the_extra_unknowns_are_significant():
-    from adcpdyn.estimators.diagnosis.diagnose import preference
+    from adcpdyn.estimators.diagnosis.selection import preference
 
     assert "compass_offset" in get_effect("compass_deviation").nests
     gain = lambda s: s.delta_bic_hac  # noqa: E731
@@ -461,7 +461,7 @@ def test_preference_keeps_the_nested_effect_unless_the_extra_unknowns_are_signif
 
 
 def test_an_unknown_stopped_at_its_bound_is_flagged():
-    from adcpdyn.estimators.diagnosis.diagnose import at_bounds
+    from adcpdyn.estimators.diagnosis.selection import at_bounds
 
     lo = next(q.lower for q in get_effect("compass_deviation").parameters if q.name == "C_rad")
     values = {"compass_deviation.A_rad": 0.01, "compass_deviation.C_rad": lo}
@@ -546,7 +546,7 @@ def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement(
     a share of a held-out gap there is or a paired held-out z above 2: with a file's own effects in
     the model the gap sits at the floor of levels estimated on it (winriver01), and the share
     cannot tell. On the knots base the share and the gap floor stay the test."""
-    from adcpdyn.estimators.diagnosis.diagnose import EffectScore, significant
+    from adcpdyn.estimators.diagnosis.selection import EffectScore, significant
 
     config = DiagnosisConfig()
     s = EffectScore(effect="heave", delta_ll=80.0, delta_bic=-150.0, p_value=0.0, n_params=3, params={}, params_se={},

@@ -1,28 +1,21 @@
 """Sim-to-real gap diagnosis of one run or of several runs of one boat: where the base model
 misses, which catalog effects explain it, and how far the held-out gap shrinks.
 
-1. Base fit (:class:`.model.GapModel` without effects): the calibration's measurement model,
-   with a calibration's platform quantities pinned (lever arms, installation angles or heading
-   misalignment and deviation) and its noise levels as the start; without one, what the runs
-   determine (installation yaw or heading misalignment against a moving reference, lever arms).
-   Navigation follows the reference (knots), so speed changes are the base's.
-2. Noise levels per (run, channel group): independent where the data allow (attitude from the
-   flexible pre-fit, bottom track from the four-beam error velocity), otherwise the lowest
-   residual level any fitted model reached.
-3. Forward selection: every applicable catalog effect is refitted on top of the current model
-   (warm start); of the significant ones (BIC better by ``bic_margin`` and at least
-   ``min_shrink`` of the held-out gap removed; on a random-walk base the coloured BIC, and a
-   smaller share or a paired held-out improvement) the one that shrinks the held-out gap most joins
-   the model (:func:`preference`: one that contains another as a special case only when its
-   extra unknowns are significant), and the next round tries the rest.
-   Shared effects (compass, beam angles, sound speed, latency, lever arms, installation) act on
-   every run; per-run ones (moving bed, heave, forced roll) on each run separately.
-4. Confounding: an effect whose parameters share most of their variance with a base unknown (or
+The orchestrator (:func:`diagnose`), blind to the runs' truth:
+
+1. Base fit and noise levels (:mod:`.base`): the calibration's measurement model with its platform
+   quantities pinned, or what the runs determine; noise levels independent where the data allow,
+   otherwise the lowest residual level any fitted model of the first round reached.
+2. Forward selection: every applicable catalog effect is refitted on top of the current model
+   (warm start; delays and velocity scales settled by :mod:`.profiles`), scored against it and the
+   most preferred significant one joins the model (:mod:`.selection`); the next round tries the
+   rest. ``given`` effects (a file's own) are fitted first and stay in every model.
+3. Confounding: an effect whose parameters share most of their variance with a base unknown (or
    with an effect already chosen) cannot be told from it in these data: the report says which
-   and why instead of claiming it.
-5. The gap: excess chi-square per sample of residuals predicted on held-out time blocks (one
-   Gauss-Newton step from the full fit with the block left out), in units of the noise levels:
-   0 when the model is as good as the noise; with several runs also with whole runs held out.
+   and why (:mod:`.statement`) instead of claiming it.
+4. The gap (:mod:`.heldout`): excess chi-square per sample of residuals predicted on held-out time
+   blocks, in units of the noise levels, before and after the chosen effects; with several runs
+   also with whole runs held out; where it lies per channel (:mod:`.where`).
 """
 
 from __future__ import annotations
@@ -32,54 +25,25 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 from ...cases.case import Case
-from ...models.effects import get_effect
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ..calibration.record import CalibrationRecord
 from . import where as where_mod
-from .readings import sound_speed_reading
-from .model import BOUND_TOL, PRIOR_GROUPS, DiagnosisBase, Fit, GapModel, residual_peaks
+from .base import (applicable, effect_of, effect_terms, fit_base, group_sigma, noise_from_data, pinned_effect_parameters,
+                   variance_components, velocity_error)
 from .config import DiagnosisConfig
-from .covariance import coloured_covariance, covariance, detection_limits, hac_standard_errors, standard_errors
-from .heldout import colour_factor, cv_residuals, heldout_gap, heldout_improvement_z
-from .base import (applicable, effect_of, effect_terms, fit_base, group_sigma, noise_from_data,
-                   pinned_effect_parameters, variance_components, velocity_error)
+from .covariance import coloured_covariance
+from .heldout import cv_residuals, heldout_gap
+from .model import PRIOR_GROUPS, Fit, GapModel, residual_peaks
 from .profiles import REFERENCE_DELAY, delay_profile, fixed_points, marginal_profile
+from .selection import EffectScore, confounding, preference, score_effect, significant
+from .statement import calibration_base_note, confounding_reason, not_the_base, reading_of
 
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
-
-
-@dataclass
-class EffectScore:
-    effect: str
-    delta_ll: float
-    delta_bic: float
-    p_value: float
-    n_params: int
-    params: dict
-    params_se: dict
-    gap_after: float
-    shrink_fraction: float
-    velocity_error_m_s: float | None
-    success: bool
-    status: str
-    iterations: int
-    colour_factor: float = 1.0  # long-run over white variance of the per-bin likelihood gains (>= 1)
-    delta_bic_hac: float = 0.0  # -2 delta_ll / colour_factor + k log n: the BIC change under coloured residuals (negative: better)
-    significant: bool = False
-    confounded_with: list = field(default_factory=list)
-    confounded_share: float = 0.0
-    round: int = 1
-    at_bound: list = field(default_factory=list)  # unknowns stopped at a bound of their range: not determined there
-    detection_limit: dict = field(default_factory=dict)  # per unknown: the smallest size this file's selection takes
-    heldout_z: float = float("nan")  # held-out gap change over its HAC standard error (random-walk base): reported,
-    # not a gate (as an alternative to the shrink it named winriver02's clean reference lever arm at z 3.2)
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+VELOCITY_SCALES = ("sound_speed_error.relative_error", "beam_angle_error.error_rad")  # unknowns scaling the beams' velocities
+ALTERNATIVE_SHARE = 0.8  # a significant effect removing this share of the chosen one's shrink is named beside it
 
 
 @dataclass
@@ -118,103 +82,10 @@ class DiagnosisResult:
         return d
 
 
-# ---------------------------------------------------------------------------- numbers
 def _key_name(model: GapModel, key) -> str:
     return key[1] if model.n_runs == 1 else f"{model.base.runs[key[0]].case.name}/{key[1]}"
 
 
-# ---------------------------------------------------------------------------- which effects
-def _confounding(model: GapModel, fit: Fit, effect_names: list, against: list, threshold: float) -> tuple[list, float]:
-    """Unknowns in ``against`` that share more than ``threshold`` of the effect parameters' variance."""
-    idx_e = [model.names.index(n) for n in effect_names]
-    idx_b = [model.names.index(n) for n in against if n in model.names]
-    free = fit.free if fit.free is not None else np.ones(len(model.names), dtype=bool)
-    idx_e = [i for i in idx_e if free[i]]
-    idx_b = [i for i in idx_b if free[i]]
-    if not idx_e or not idx_b:
-        return [], 0.0
-    C = covariance(fit, model, idx_e + idx_b)
-    ne = len(idx_e)
-    Cb = C[ne:, ne:]
-    worst, names = 0.0, []
-    for i in range(ne):
-        if C[i, i] <= 0:
-            continue
-        c = C[i, ne:]
-        share = float(c @ np.linalg.pinv(Cb) @ c / C[i, i])
-        if share > worst:
-            worst = share
-            F = np.abs(c) / np.sqrt(np.maximum(np.diag(Cb) * C[i, i], 1e-300))
-            names = [model.names[idx_b[j]] for j in np.argsort(F)[::-1] if F[j] > 0.3][:3]
-    return (names if worst > threshold else []), worst
-
-
-def _reason(effect: str, names: list, base: DiagnosisBase) -> str:
-    """Why two things are not told apart here, in the field's words."""
-    joined = ", ".join(names)
-    if effect == "moving_bed" and any(n.startswith(("heading_misalignment", "installation_yaw")) for n in names):
-        courses = []
-        for r in base.runs:
-            if r.moving_reference:
-                v = r.reference_velocity_m_s[:, :2]
-                ok = np.all(np.isfinite(v), axis=1)
-                courses.append(f"{np.rad2deg(np.angle(np.mean(np.exp(1j * np.arctan2(v[ok, 1], v[ok, 0]))))) % 360:.0f}")
-        return (f"moving bed vs {'heading misalignment' if base.spec.heading != 'off' else 'installation yaw'}: "
-                f"{'one course' if len(courses) == 1 else 'courses'} over ground {', '.join(courses)} deg, along which a bed "
-                "moving under the bottom track and a heading error look alike; calibrate transects in several directions "
-                "together (calibrate --joint) and diagnose with that calibration")
-    return f"{effect} vs {joined}: these data do not tell them apart"
-
-
-def _score(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_obs, config, round_) -> EffectScore:
-    k = len(model.effect_index) - len(ref_model.effect_index)
-    dll = fit.log_likelihood(model) - ref_fit.log_likelihood(ref_model)
-    dbic = -2.0 * dll + k * np.log(n_obs)
-    gap_after, _ = heldout_gap(model, cv, noise)
-    shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
-    mine = [n for n in model.effect_names if effect_of(n) == name]
-    idx = [model.names.index(n) for n in mine]
-    values = {n: float(fit.x[i]) for n, i in zip(mine, idx)}
-    colour = colour_factor(model, fit, ref_model, ref_fit, noise)
-    # a profile's curvature counts white residuals: its SE widened by the same colour factor as the BIC
-    white = standard_errors(fit, model, idx)
-    hac = hac_standard_errors(fit, model, idx)
-    limits = detection_limits(mine, np.maximum(hac, white), k, n_obs, config.bic_margin)
-    # a free unknown's SE under coloured residuals (never below the white one, as the colour factor is at least 1)
-    profiled = {n: v * np.sqrt(colour) for n, v in fit.profile_se.items() if n in mine}
-    se = {**{n: float(max(h, w)) if w > 0 else 0.0 for n, h, w in zip(mine, hac, white)}, **profiled}
-    finite = [n for n in profiled if np.isfinite(profiled[n])]
-    limits.update(detection_limits(finite, [profiled[n] for n in finite], k, n_obs, config.bic_margin))
-    return EffectScore(
-        colour_factor=colour, delta_bic_hac=float(-2.0 * dll / colour + k * np.log(n_obs)),
-        effect=name, delta_ll=float(dll), delta_bic=float(dbic),
-        # an effect without unknowns is not nested in the model it replaces: no likelihood-ratio test, the BIC compares
-        p_value=float(stats.chi2.sf(max(2 * dll, 0.0), k)) if k else float("nan"),
-        at_bound=at_bounds(name, values, {n: float(model.scale[i]) for n, i in zip(mine, idx)}), n_params=k, params=values,
-        params_se={n: float(e) for n, e in se.items()}, detection_limit=limits, gap_after=float(gap_after),
-        shrink_fraction=float(shrink), velocity_error_m_s=velocity_error(model, fit), success=fit.success,
-        status=fit.status, iterations=fit.iterations, round=round_,
-        heldout_z=heldout_improvement_z(model, cv, ref_model, ref_cv, noise))
-
-
-def at_bounds(effect: str, values: dict, scales: dict | None = None) -> list:
-    """The effect's unknowns (full names) whose estimate sits on a bound of the effect's range: the
-    data pushed them there, so their value and its standard error say nothing. "On" as the fit
-    holds an unknown by its bound (:meth:`GapModel.solve`'s ``free``): within ``BOUND_TOL`` of the range, or
-    of the unknown's scale (``scales``, full name -> scale) where that is larger; an interior-point
-    solver stops a hair inside a bound it presses on."""
-    ranges = {q.name: (q.lower, q.upper) for q in get_effect(effect).parameters}
-    out = []
-    for name, v in values.items():
-        lo, hi = ranges.get(name.rsplit(".", 1)[-1], (-np.inf, np.inf))
-        width = hi - lo if np.isfinite(hi - lo) else max(1.0, abs(v))
-        tol = BOUND_TOL * max(width, (scales or {}).get(name, 0.0))
-        if min(abs(v - lo), abs(v - hi)) <= tol:
-            out.append(name)
-    return out
-
-
-# ---------------------------------------------------------------------------- main
 def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: CalibrationRecord | None = None,
              progress=None) -> DiagnosisResult:
     """Diagnose the gap between the base model and one case (or several runs of one boat), blind
@@ -341,11 +212,11 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         ref_gap, _ = heldout_gap(current[0], cv[current_name], noise)
         scores = []
         for name, (label, model, f) in tried.items():
-            s = _score(name, model, f, current[0], current[1], ref_gap, cv[label], cv[current_name], noise, n_obs,
+            s = score_effect(name, model, f, current[0], current[1], ref_gap, cv[label], cv[current_name], noise, n_obs,
                        config, round_)
             mine = [n for n in model.effect_names if effect_of(n) == name]
             others = against + [n for n in model.effect_names if n not in mine]
-            s.confounded_with, s.confounded_share = _confounding(model, f, mine, others, config.confounded_share)
+            s.confounded_with, s.confounded_share = confounding(model, f, mine, others, config.confounded_share)
             s.significant = significant(s, ref_gap, config, walk)
             scores.append(s)
         scores = preference(scores, gain, config.bic_margin)
@@ -357,7 +228,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         for sc in scores:
             if sc.confounded_with and gain(sc) < -config.bic_margin and sc.effect not in [c["effect"] for c in confounded]:
                 confounded.append({"effect": sc.effect, "with": sc.confounded_with, "shared_variance": sc.confounded_share,
-                                   "chosen": sc.significant, "statement": _reason(sc.effect, sc.confounded_with, base)})
+                                   "chosen": sc.significant,
+                                   "statement": confounding_reason(sc.effect, sc.confounded_with, base)})
         best = next((s for s in scores if s.significant), None)
         if best is None:
             break
@@ -367,7 +239,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             alternatives.append({"chosen": best.effect, "round": round_, "shrink": best.shrink_fraction,
                                  "delta_bic": best.delta_bic, "gap_after": best.gap_after,
                                  "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
-                                                   "gap_after": s.gap_after, **_reading_of(s, cases)} for s in close]})
+                                                   "gap_after": s.gap_after, **reading_of(s, cases)} for s in close]})
         selected.append(best.effect)
         selected_terms += effect_terms(base, best.effect)
         current_name = tried[best.effect][0]
@@ -392,7 +264,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             statement += (f"; a significant gap remains after {'it' if len(selected) == 1 else 'them'} (excess chi2 "
                           f"{gap_after:.3f}, z = {z_after:.1f}), worst in {after[0]['channel']} ({after[0]['detail']}): "
                           "an effect outside the catalog, or more than the catalog's"
-                          + _not_the_base(current[0]))
+                          + not_the_base(current[0]))
         v_after = velocity_error(*current)
     else:
         gap_after, z_after, verdict = gap_before, z_before, "none"
@@ -401,7 +273,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             statement = (f"no catalog effect is significant, but a significant gap remains (held-out excess chi2 "
                          f"{gap_before:.3f}, z = {z_before:.1f}), worst in {where[0]['channel']} "
                          f"({where[0]['detail']}): an effect outside the catalog"
-                         + _not_the_base(start_model))
+                         + not_the_base(start_model))
         else:
             statement = f"no significant gap: the base model fits to the noise (held-out excess chi2 {gap_before:.3f})"
         v_after = v_before
@@ -419,7 +291,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                       f"{a['chosen']} as the likeliest of them, not as proven"
                       + "".join(f" ({x['effect']}: {x['reading']['text']})" for x in a["alternatives"] if "reading" in x))
     for sc in chosen if selected else []:
-        statement += "".join(f"; {sc.effect}: {r['text']}" for r in _reading_of(sc, cases).values())
+        statement += "".join(f"; {sc.effect}: {r['text']}" for r in reading_of(sc, cases).values())
     if given:
         statement = ("on top of the run's own " + ", ".join(f"{n} = {v['value']:.4g} +- {v['se']:.2g}" for n, v in given.items())
                      + ": " + statement)
@@ -453,117 +325,13 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         case=", ".join(c.name for c in cases), verdict=verdict, statement=statement, gap_before=float(gap_before),
         gap_after=float(gap_after), gap_z_before=float(z_before), gap_z_after=float(z_after),
         remaining_gap_significant=bool(remaining), where=where,
-        ranking=[{**r.to_dict(), **_reading_of(r, cases)} for r in ranking],
+        ranking=[{**r.to_dict(), **reading_of(r, cases)} for r in ranking],
         noise={_key_name(base_model, k): v for k, v in noise.items()}, base=base_info,
         velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, given=given,
         given_covariance=given_covariance,
         confounded=confounded,
         alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
-
-
-def _reading_of(score: EffectScore, cases: list) -> dict:
-    """``{"reading": ...}``: a sound-speed error's estimate in the field's terms
-    (:func:`.readings.sound_speed_reading`: the water's sound speed, and the salinity that gives it at
-    the recorded temperature); empty for other effects."""
-    key = "sound_speed_error.relative_error"
-    if score.effect != "sound_speed_error" or key not in score.params:
-        return {}
-    ins = cases[0].instrument
-    return {"reading": sound_speed_reading(ins.sound_speed_m_s, score.params[key], score.params_se.get(key, float("nan")),
-                                           ins.temperature_c, ins.salinity_psu, cases[0].environment.transducer_depth_m)}
-
-
-RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects on quantities a calibration fits
-
-
-def calibration_base_note(calibration, base, selected: list, ranking: list) -> str:
-    """What to say when the runs diagnosed are the calibration's own, calibrated on another
-    navigation than this base's, and an effect on a quantity the calibration fitted (heading, bed)
-    is named: on the same data two bases can read that quantity apart (knots miss a real boat's
-    motion between fixes), so the effect may be the bases' difference rather than a change since
-    the calibration. '' otherwise."""
-    named = [e for e in selected if e in RECALIBRATED]
-    if calibration is None or not named:
-        return ""
-    own = [calibration.run_of(r.case) for r in base.runs]
-    if any(o is None or o.navigation is None for o in own):  # not its runs, or a file older than the record
-        return ""
-    differs = {(o.navigation, r.navigation) for o, r in zip(own, base.runs) if o.navigation != r.navigation}
-    if not differs:
-        return ""
-    calibrated, here = (", ".join(sorted({pair[i] for pair in differs})) for i in (0, 1))
-    found = []
-    for name in named:
-        score = next(s for s in ranking if s.effect == name and s.significant)
-        for key, value in score.params.items():
-            se = score.params_se.get(key)
-            angle = key.endswith("A_rad")
-            if angle or "moving_bed" in key:
-                label, unit, k = (key[:-4], "deg", np.degrees(1.0)) if angle else (key.removesuffix("_m_s"), "m/s", 1.0)
-                found.append(f"{label} {k * value:+.3g}" + (f" +- {k * se:.2g}" if se is not None else "") + f" {unit}")
-    extra = ""
-    if calibration.heading_misalignment_se_rad is not None and any(n.startswith("compass") for n in named):
-        extra = f" (the calibration's heading misalignment: +- {np.degrees(calibration.heading_misalignment_se_rad):.2g} deg)"
-    return (f"these are the calibration's own runs, calibrated on {calibrated} navigation while this base takes {here}: "
-            f"{', '.join(found)}{extra} may be the two bases reading the same data apart rather than a change since the "
-            f"calibration; calibrate with --navigation {here} (this base) and diagnose again before reading it as one")
-
-
-def significant(s: EffectScore, ref_gap: float, config: DiagnosisConfig, walk: bool) -> bool:
-    """Whether an effect is significant against the current model (held-out gap ``ref_gap``): its
-    BIC better by the margin (the coloured one on a random-walk base), and out of sample a share of
-    the held-out gap removed, on a random-walk base alternatively a paired held-out improvement.
-    Never with an unknown stopped at a bound of the effect's plausible range (``at_bound``): the
-    data want it beyond anything the effect can be, so it stands in for something else (a 5.7-deg
-    beam-angle error fitting a bed's slant ranges on a real transect without GNSS)."""
-    if s.at_bound:
-        return False
-    if walk:
-        return bool(s.delta_bic_hac < -config.bic_margin
-                    and ((s.shrink_fraction >= config.min_shrink_walk and ref_gap > config.min_gap)
-                         or (s.heldout_z > config.heldout_z_walk and ref_gap - s.gap_after >= config.min_gain_walk)))
-    return bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink and ref_gap > config.min_gap)
-
-
-SHRINK_TIE = 0.01  # held-out shrinks this close predict alike: the BIC decides between them
-
-
-def preference(scores: list, gain, bic_margin: float) -> list:
-    """The scores in order of preference: the significant ones first, the one that predicts the
-    held-out data best (largest shrink) ahead, since two effects the BIC both accepts are told apart
-    by what they predict, not by in-sample fit under residuals whose colour is only estimated;
-    an effect that contains a significant other as a special case (``Effect.nests``) goes behind
-    it unless its extra unknowns are significant themselves (BIC better than the other's by
-    ``bic_margin``). Shrinks within ``SHRINK_TIE`` of the largest are a tie, which the better BIC
-    breaks (the same prediction, fewer or better-spent unknowns). The rest follow by BIC gain."""
-    significant = sorted((s for s in scores if s.significant), key=lambda s: -s.shrink_fraction)
-    if significant:
-        tied = [s for s in significant if s.shrink_fraction >= significant[0].shrink_fraction - SHRINK_TIE]
-        best = min(tied, key=gain)
-        significant.remove(best)
-        significant.insert(0, best)
-    for big in list(significant):
-        for name in get_effect(big.effect).nests:
-            small = next((s for s in significant if s.effect == name), None)
-            if small is not None and gain(big) - gain(small) > -bic_margin:
-                i, j = significant.index(big), significant.index(small)
-                if j > i:
-                    significant.insert(i, significant.pop(j))
-    return significant + sorted((s for s in scores if not s.significant), key=gain)
-
-
-ALTERNATIVE_SHARE = 0.8  # a significant effect removing this share of the chosen one's shrink is named beside it
-VELOCITY_SCALES = ("sound_speed_error.relative_error", "beam_angle_error.error_rad")  # unknowns scaling the beams' velocities
-
-
-def _not_the_base(model: GapModel) -> str:
-    """What a remaining gap on a random-walk base is not: the boat's ping-to-ping motion (the
-    base's velocity per ping follows it) nor noise levels set by hand (they are the data's)."""
-    if not model.random_walk:
-        return ""
-    return ("; not the boat's ping-to-ping motion (the base gives it a velocity at every ping) nor noise levels "
-            "set by hand (each channel's is the data's own)")
 
 
 def _renamed(model: GapModel, overrides: dict) -> dict:

@@ -1,0 +1,88 @@
+"""The words of a diagnosis's statement beyond its numbers: why an effect cannot be told from
+what it is confounded with, what a remaining gap on a random-walk base is not, a sound-speed
+estimate in the field's terms, and the note when the runs diagnosed are a calibration's own,
+calibrated on another navigation than the base's. Apart from the orchestrator (:mod:`.diagnose`),
+which composes them with the numbers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .model import DiagnosisBase, GapModel
+from .readings import sound_speed_reading
+from .selection import EffectScore
+
+
+def confounding_reason(effect: str, names: list, base: DiagnosisBase) -> str:
+    """Why two things are not told apart here, in the field's words."""
+    joined = ", ".join(names)
+    if effect == "moving_bed" and any(n.startswith(("heading_misalignment", "installation_yaw")) for n in names):
+        courses = []
+        for r in base.runs:
+            if r.moving_reference:
+                v = r.reference_velocity_m_s[:, :2]
+                ok = np.all(np.isfinite(v), axis=1)
+                courses.append(f"{np.rad2deg(np.angle(np.mean(np.exp(1j * np.arctan2(v[ok, 1], v[ok, 0]))))) % 360:.0f}")
+        return (f"moving bed vs {'heading misalignment' if base.spec.heading != 'off' else 'installation yaw'}: "
+                f"{'one course' if len(courses) == 1 else 'courses'} over ground {', '.join(courses)} deg, along which a bed "
+                "moving under the bottom track and a heading error look alike; calibrate transects in several directions "
+                "together (calibrate --joint) and diagnose with that calibration")
+    return f"{effect} vs {joined}: these data do not tell them apart"
+
+
+def not_the_base(model: GapModel) -> str:
+    """What a remaining gap on a random-walk base is not: the boat's ping-to-ping motion (the
+    base's velocity per ping follows it) nor noise levels set by hand (they are the data's)."""
+    if not model.random_walk:
+        return ""
+    return ("; not the boat's ping-to-ping motion (the base gives it a velocity at every ping) nor noise levels "
+            "set by hand (each channel's is the data's own)")
+
+
+def reading_of(score: EffectScore, cases: list) -> dict:
+    """``{"reading": ...}``: a sound-speed error's estimate in the field's terms
+    (:func:`.readings.sound_speed_reading`: the water's sound speed, and the salinity that gives it at
+    the recorded temperature); empty for other effects."""
+    key = "sound_speed_error.relative_error"
+    if score.effect != "sound_speed_error" or key not in score.params:
+        return {}
+    ins = cases[0].instrument
+    return {"reading": sound_speed_reading(ins.sound_speed_m_s, score.params[key], score.params_se.get(key, float("nan")),
+                                           ins.temperature_c, ins.salinity_psu, cases[0].environment.transducer_depth_m)}
+
+
+RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects on quantities a calibration fits
+
+
+def calibration_base_note(calibration, base, selected: list, ranking: list) -> str:
+    """What to say when the runs diagnosed are the calibration's own, calibrated on another
+    navigation than this base's, and an effect on a quantity the calibration fitted (heading, bed)
+    is named: on the same data two bases can read that quantity apart (knots miss a real boat's
+    motion between fixes), so the effect may be the bases' difference rather than a change since
+    the calibration. '' otherwise."""
+    named = [e for e in selected if e in RECALIBRATED]
+    if calibration is None or not named:
+        return ""
+    own = [calibration.run_of(r.case) for r in base.runs]
+    if any(o is None or o.navigation is None for o in own):  # not its runs, or a file older than the record
+        return ""
+    differs = {(o.navigation, r.navigation) for o, r in zip(own, base.runs) if o.navigation != r.navigation}
+    if not differs:
+        return ""
+    calibrated, here = (", ".join(sorted({pair[i] for pair in differs})) for i in (0, 1))
+    found = []
+    for name in named:
+        score = next(s for s in ranking if s.effect == name and s.significant)
+        for key, value in score.params.items():
+            se = score.params_se.get(key)
+            angle = key.endswith("A_rad")
+            if angle or "moving_bed" in key:
+                label, unit, k = (key[:-4], "deg", np.degrees(1.0)) if angle else (key.removesuffix("_m_s"), "m/s", 1.0)
+                found.append(f"{label} {k * value:+.3g}" + (f" +- {k * se:.2g}" if se is not None else "") + f" {unit}")
+    extra = ""
+    if calibration.heading_misalignment_se_rad is not None and any(n.startswith("compass") for n in named):
+        extra = f" (the calibration's heading misalignment: +- {np.degrees(calibration.heading_misalignment_se_rad):.2g} deg)"
+    return (f"these are the calibration's own runs, calibrated on {calibrated} navigation while this base takes {here}: "
+            f"{', '.join(found)}{extra} may be the two bases reading the same data apart rather than a change since the "
+            f"calibration; calibrate with --navigation {here} (this base) and diagnose again before reading it as one")
