@@ -1,7 +1,7 @@
 """The measurement model of a survey: one or several runs of one boat at one site, built once.
 
 Calibration and diagnosis both pose their NLPs on it. Unknowns, in blocks owned by an
-:class:`Unknowns` layout (names, scales, bounds, offsets):
+:class:`.unknowns.Unknowns` layout (names, scales, bounds, offsets):
 
 * shared by the runs (the platform): the lever-arm block of the formulation
   (:mod:`.formulations`), the installation angles (vessel-frame sensor; a head sensor
@@ -28,61 +28,36 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
 from ..cases.case import Case
-from ..models.janus import error_velocity
 from ..models.kinematics import centre_of_rotation_depth
 from ..models.measurement import bottom_track_function
-from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE, AttitudeParams, SampledAttitude,
+from ..models.motion import (HEADING_CORRECTION_SIZE, LOCAL_ATTITUDE_SIZE,
                              attitude_function, evaluate_attitude, heading_corrected_function, local_attitude_function,
                              with_extra_mode)
-from ..models.rotations import course_difference_rad, euler_matrix, euler_matrix_and_rate, unskew
+from ..models.rotations import euler_matrix, euler_matrix_and_rate, unskew
 from ..models.sensors import compass_correction, reference_point_velocity
 from ..solvers.compiled import compiled
-from .asc import asc
-from .attitude_fit import AttitudeFit, sampled_attitude
 from .formulations import AXES, lever_block
+from .knots import hat_basis, hat_basis_dm, hat_basis_sparse, navigation_slope, sparse_dm, walk_increments, window_basis_sparse
 from .row_jacobian import RowBlock, RowJacobian
+from .run_setup import Channel, RunSetup, heading_centre, section_positions, speed_guess
+from .unknowns import Unknowns, attitude_bounds
 
 GROUPS = ("heading", "pitch", "roll", "bt", "range", "reference", "motion", "vertical")
 PRIOR_GROUPS = ("motion", "vertical")  # pseudo-observations of priors (the walk's increments, heave's levels), not data
 VELOCITY_NAME = re.compile(r"V\d+_[xyz]")  # a navigation velocity unknown (V<knot>_<axis>, after any run prefix)
 NED = ("north", "east", "down")
-ATTITUDE_SOURCES = ("model", "samples", "frozen")
 MOVING_BEDS = ("off", "constant", "section")
-NAVIGATIONS = ("knots", "random_walk")
-NAVIGATION_CHOICES = NAVIGATIONS + ("auto",)  # what a user may ask for: auto decides per run
 ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
 HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
 BED_SCALE_M_S = 0.05
 ROTATION_STEP_S = 0.05  # central-difference step of the reference point's rotational velocity (its slope)
-REFERENCE_MARGIN_KNOTS = 1.0  # reference samples kept up to this many knot intervals beyond the pings
-
-
-def has_moving_reference(case: Case) -> bool:
-    """Whether the run carries a moving reference velocity (GNSS, video: not a stationary one)."""
-    ref = case.reference
-    return ref is not None and not ref.stationary and ref.velocity_m_s is not None
-
-
-def choose_navigation(case: Case, attitude_source: str, requested: str = "auto") -> str:
-    """A run's vessel-velocity model: ``requested``, or for ``auto`` a velocity per ping
-    (``random_walk``) where the beams take the sensor's samples and no reference holds the run
-    still (a real boat, which changes speed between two fixes: the bottom track sees it, a smooth
-    curve does not; without a reference the bottom track alone follows it, and a smooth curve
-    through it leaves the boat's own motion as a gap), ``knots`` where a motion model follows the
-    attitude (its course as smooth as the model) or the reference stays put."""
-    if requested not in NAVIGATION_CHOICES:
-        raise ValueError(f"navigation: expected one of {list(NAVIGATION_CHOICES)}, got {requested!r}")
-    if requested != "auto":
-        return requested
-    held_still = case.reference is not None and case.reference.stationary
-    return "random_walk" if attitude_source == "samples" and not held_still else "knots"
 
 
 def channel_slices(channels: list[tuple[str, int]]) -> dict:
@@ -97,388 +72,6 @@ def _reference_velocity() -> ca.Function:
 
 
 REFERENCE_VELOCITY = _reference_velocity()  # (v_a, dLambda/dt, body point in the sensor frame) -> its velocity
-
-
-def hat_basis_sparse(times, knots) -> sp.csr_matrix:
-    """Piecewise-linear interpolation weights, (len(times), len(knots)), constant beyond the ends:
-    each time's two knots only (np.interp's arithmetic), never an (N, K) dense array."""
-    knots = np.asarray(knots, dtype=float)
-    t = np.clip(np.asarray(times, dtype=float).reshape(-1), knots[0], knots[-1])
-    j = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, knots.size - 2)
-    a = (1.0 / (knots[j + 1] - knots[j])) * (t - knots[j])
-    rows = np.repeat(np.arange(t.size), 2)
-    H = sp.csr_matrix((np.column_stack([1.0 - a, a]).ravel(), (rows, np.column_stack([j, j + 1]).ravel())),
-                      shape=(t.size, knots.size))
-    H.eliminate_zeros()  # a time on a knot touches that knot alone
-    return H
-
-
-def hat_basis(times, knots) -> np.ndarray:
-    """:func:`hat_basis_sparse` as a dense array (for a few knots, e.g. the bed's)."""
-    return hat_basis_sparse(times, knots).toarray()
-
-
-def hat_basis_dm(times, knots) -> ca.DM:
-    """:func:`hat_basis_sparse` as a CasADi matrix of the same sparsity, so the residual Jacobian
-    stays sparse in the knot columns (a dense DM keeps its zeros as structure)."""
-    return sparse_dm(hat_basis_sparse(times, knots))
-
-
-def sparse_dm(H: sp.spmatrix) -> ca.DM:
-    """A scipy sparse matrix as a CasADi DM of the same sparsity."""
-    H = sp.csc_matrix(H)
-    H.sort_indices()
-    return ca.DM(ca.Sparsity(H.shape[0], H.shape[1], H.indptr.tolist(), H.indices.tolist()), H.data)
-
-
-def window_basis_sparse(windows, knots) -> sp.csr_matrix:
-    """Weights of the knot velocities in the mean of the piecewise-linear velocity over each window
-    [a, b] (rows of ``windows``): exact, since the trapezoid rule is exact on every linear piece
-    between the breakpoints (a, the knots inside, b). A GNSS velocity differenced from two fixes is
-    that mean, not the velocity at its time stamp."""
-    knots = np.asarray(knots, dtype=float)
-    windows = np.asarray(windows, dtype=float).reshape(-1, 2)
-    rows = []
-    for a, b in windows:
-        t = np.concatenate([[a], knots[(knots > a) & (knots < b)], [b]])
-        H = hat_basis_sparse(t, knots)
-        w = np.diff(t) / (2.0 * (b - a))
-        rows.append(sp.csr_matrix(np.concatenate([[0.0], w]) + np.concatenate([w, [0.0]])) @ H)
-    return sp.vstack(rows, format="csr") if rows else sp.csr_matrix((0, knots.size))
-
-
-def bt_noise_from_error_velocity(case: Case) -> float:
-    """Beam noise from the error velocity (immune to rigid motion): robust MAD estimate."""
-    err, norm = error_velocity(case.pings.bt_radial_m_s, case.instrument.beam_directions())
-    err = err[np.isfinite(err)]
-    if err.size < 5:
-        return 0.01
-    mad = 1.4826 * np.median(np.abs(err - np.median(err)))
-    return float(max(mad / norm, 1e-4))
-
-
-def reference_noise_from_differences(time_s, velocity_m_s) -> float:
-    """Reference velocity noise from first differences (white noise: sd(diff) = sqrt 2 sigma),
-    robust MAD over the horizontal axes; an upper bound when the vessel accelerates."""
-    v = np.asarray(velocity_m_s, dtype=float)[:, :2]
-    d = np.diff(v, axis=0)
-    d = d[np.all(np.isfinite(d), axis=1)].ravel()
-    if d.size < 10:
-        return 0.02
-    return float(max(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2), 1e-3))
-
-
-def initial_noise(case: Case, fit: AttitudeFit | None, with_attitude: bool) -> dict:
-    """Independent noise levels to start from: attitude pre-fit residuals, the bottom track's
-    error velocity, the reference's first differences, 2 cm for ranges."""
-    s = {"bt": bt_noise_from_error_velocity(case), "range": 0.02}
-    if with_attitude and fit is not None:
-        s.update(heading=max(fit.sigmas[0], 1e-4), pitch=max(fit.sigmas[1], 1e-4), roll=max(fit.sigmas[2], 1e-4))
-    ref = case.reference
-    if ref is not None and ref.time_s is not None and ref.velocity_m_s is not None:
-        s["reference"] = reference_noise_from_differences(ref.time_s, ref.velocity_m_s)
-    return s
-
-
-def attitude_bounds(params: AttitudeParams, min_decay: float = 0.0, decay_scale: float = 0.05):
-    """Names, scales and bounds of an attitude block (frequencies kept within -20/+25 % of the
-    pre-fit's, decays in [min_decay, 3] 1/s, biases within +-90 deg)."""
-    lay = params.layout
-    s = lay.slices()
-    scale, lo, hi = np.ones(lay.size), np.full(lay.size, -np.inf), np.full(lay.size, np.inf)
-    for k, (w, _) in enumerate(params.modes):
-        i = s["modes"].start + 2 * k
-        scale[i], lo[i], hi[i] = 0.01 * w, 0.8 * w, 1.25 * w
-        scale[i + 1], lo[i + 1], hi[i + 1] = decay_scale, min_decay, 3.0
-    for axis in ("roll", "pitch", "yaw"):
-        cs = getattr(params, f"{axis}_cs")
-        scale[s[f"{axis}_cs"]] = np.repeat(np.maximum(np.hypot(cs[:, 0], cs[:, 1]), 1e-3), 2)
-    for axis in ("roll", "pitch"):
-        i = s[f"{axis}_bias"].start
-        scale[i], lo[i], hi[i] = 0.01, -np.pi / 2, np.pi / 2
-    scale[s["yaw_trend"]] = [1.0 if k == 0 else 0.01**k for k in range(lay.yaw_trend_order + 1)]
-    return lay.names(), scale, lo, hi
-
-
-class Unknowns:
-    """The decision vector as named blocks: each block's symbol, names, scales and bounds,
-    and where it sits (``slices[key]``)."""
-
-    def __init__(self):
-        self.symbols, self.names, self.slices = [], [], {}
-        self._scale, self._lo, self._hi = [], [], []
-
-    def add(self, key: str, names, scale, lo, hi, sym: ca.MX | None = None) -> ca.MX:
-        """A block of unknowns (a new symbol, or ``sym`` when a model built it) -> its symbol."""
-        n = len(names)
-        sym = ca.MX.sym(key, n) if sym is None else sym
-        start = len(self.names)
-        self.slices[key] = slice(start, start + n)
-        self.symbols.append(sym)
-        self.names += list(names)
-        for target, value in ((self._scale, scale), (self._lo, lo), (self._hi, hi)):
-            target.extend(np.broadcast_to(np.asarray(value, dtype=float), (n,)).tolist())
-        return sym
-
-    @property
-    def x(self) -> ca.MX:
-        return ca.vertcat(*self.symbols) if self.symbols else ca.MX(0, 1)
-
-    @property
-    def scale(self) -> np.ndarray:
-        return np.array(self._scale, dtype=float)
-
-    @property
-    def lower(self) -> np.ndarray:
-        return np.array(self._lo, dtype=float)
-
-    @property
-    def upper(self) -> np.ndarray:
-        return np.array(self._hi, dtype=float)
-
-    def index(self, key: str) -> np.ndarray:
-        s = self.slices.get(key)
-        return np.arange(s.start, s.stop) if s is not None else np.zeros(0, dtype=int)
-
-
-@dataclass(frozen=True)
-class Channel:
-    """One residual channel of one run: ``name`` as in CALIB.json (heading, bt_beam1,
-    range_beam2, reference_north, ...), its rows' times and mask."""
-
-    run: int
-    name: str
-    time_s: np.ndarray
-    mask: np.ndarray
-
-    @property
-    def size(self) -> int:
-        return int(self.time_s.size)
-
-    @property
-    def group(self) -> str:
-        return self.name.split("_")[0]
-
-
-@dataclass
-class RunSetup:
-    """The numeric decisions of one run, made before anything symbolic is built.
-
-    ``attitude_source``: ``model`` (motion-model unknowns of this run), ``samples`` (the
-    sensor's samples interpolated linearly, data) or ``frozen`` (a model fixed beforehand,
-    the two-stage method). ``knots``: navigation-velocity knot times (None: stationary).
-    ``reference_rows`` (derived from the knots): which reference samples enter (inside the pings' span).
-    ``section_position``: position of each ping along the section in [0, 1] (section bed).
-    ``navigation``: ``knots`` (the velocity piecewise-linear between the knots, nothing else) or
-    ``random_walk`` (a velocity at every ping, :func:`ping_knots`, tied to its neighbours by a
-    random-walk prior: the ``motion`` rows (V_j+1 - V_j) / sqrt(dt_j) of the horizontal velocity, whose
-    level sqrt(q) in m/s/sqrt(s) is the process intensity, a real boat's ping-to-ping speed changes
-    being motion; the vertical velocity, a floating boat's heave, zero-mean: the ``vertical`` rows
-    V_j,down, whose level is its spread).
-    """
-
-    case: Case
-    fit: AttitudeFit
-    attitude_source: str
-    timing: str
-    knots: np.ndarray | None
-    use_ranges: bool
-    attitude_reason: str = ""
-    section_position: np.ndarray | None = None
-    sample_shift_s: float = 0.0  # rows take the samples' segment about t + shift (a latency's current estimate)
-    sample_tilt_lead_s: float = 0.0  # and their tilts low-pass-inverted with this tau (a tilt low-pass' current estimate)
-    reference_shift_s: float = 0.0  # reference rows take the navigation at t - shift (a reference latency's current estimate)
-    navigation: str = "knots"
-    samples: SampledAttitude | None = field(default=None, init=False)
-    reference_rows: np.ndarray | None = field(default=None, init=False)
-    depth_from_ranges: bool = field(default=False, init=False)  # the case's depth is its ranges' (:meth:`Case.depth_from_ranges`)
-
-    @property
-    def random_walk(self) -> bool:
-        """A velocity at every ping under the random-walk prior (a moving run with random_walk)."""
-        return self.navigation == "random_walk" and self.knots is not None
-
-    def noise_guess(self) -> dict:
-        """{group: starting noise level} of this run: :func:`initial_noise`, and when it walks the
-        walk's intensity and the vertical velocity's level from the static (ASC) velocities, one
-        correction for both (:func:`random_walk_intensity`, :func:`vertical_velocity_level`)."""
-        guess = initial_noise(self.case, self.fit, self.attitude_source == "model")
-        if self.random_walk:
-            v = asc(self.case).vessel_velocity_m_s
-            guess["motion"] = random_walk_intensity(self.case, v)
-            guess["vertical"] = vertical_velocity_level(self.case, v)
-        return guess
-
-    def __post_init__(self):
-        if self.attitude_source not in ATTITUDE_SOURCES:
-            raise ValueError(f"attitude_source: expected one of {list(ATTITUDE_SOURCES)}, got {self.attitude_source!r}")
-        if self.navigation not in NAVIGATIONS:
-            raise ValueError(f"navigation: expected one of {list(NAVIGATIONS)}, got {self.navigation!r}")
-        if self.random_walk and self.knots.size < 2:
-            raise ValueError("navigation: 'random_walk' needs at least two knots")
-        self.reference_rows = reference_rows(self.case, self.knots)
-        self.depth_from_ranges = self.case.depth_from_ranges()
-        if self.attitude_source == "samples":
-            self.samples = sampled_attitude(self.case, self.fit)
-
-    def covered(self, times) -> np.ndarray:
-        """Rows the beams' attitude covers: all with a motion model; with the sensor's samples only
-        those inside the samples' span (samples are interpolated, never extrapolated: a ping 0.14 s
-        before the first sample, just after a release from a heel, carried 0.1 m/s of error)."""
-        times = np.asarray(times, dtype=float)
-        if self.samples is None:
-            return np.ones(times.shape, dtype=bool)
-        return (times >= self.samples.time_s[0]) & (times <= self.samples.time_s[-1])
-
-    @property
-    def moving_reference(self) -> bool:
-        return self.reference_rows is not None and self.reference_rows.size > 0
-
-    @property
-    def reference_time_s(self) -> np.ndarray:
-        return self.case.reference.time_s[self.reference_rows]
-
-    @property
-    def reference_velocity_m_s(self) -> np.ndarray:
-        return self.case.reference.velocity_m_s[self.reference_rows]
-
-    @property
-    def reference_window_s(self) -> np.ndarray | None:
-        """(L, 2) the interval each reference velocity averages over (None: instantaneous samples)."""
-        w = self.case.reference.window_s
-        return None if w is None else w[self.reference_rows]
-
-
-def knot_times(case: Case, interval_s: float | None) -> np.ndarray | None:
-    """Navigation knots over the pings' span (None when the vessel is known to stay put).
-
-    Default spacing: five reference intervals (or ping intervals without a reference), at
-    least 1/50 of the run. Knots cover the pings only: a reference recorded far outside
-    them (a clock off by hours) cannot stretch the problem. A knot with neither a ping nor a
-    reference velocity between its neighbours (inside a gap of both) is left out: nothing would
-    determine its velocity, and the curve crosses the gap straight between the knots that bound it.
-    """
-    ref = case.reference
-    if ref is not None and ref.stationary:
-        return None
-    t = case.pings.time_s
-    duration = float(t[-1] - t[0])
-    if interval_s is None:
-        if ref is not None and ref.time_s is not None and ref.time_s.size > 1:
-            interval_s = max(5 * float(np.median(np.diff(ref.time_s))), duration / 50)
-        else:
-            interval_s = max(5 * float(np.median(np.diff(t))), duration / 30)
-    n_knots = max(2, int(np.ceil(duration / interval_s)) + 1)
-    knots = np.linspace(t[0], t[-1], n_knots)
-    data = t
-    if ref is not None and ref.time_s is not None and ref.velocity_m_s is not None:
-        data = np.sort(np.concatenate([t, ref.time_s[np.all(np.isfinite(ref.velocity_m_s[:, :2]), axis=1)]]))
-    # samples in (knot before, knot after) of each knot: the counts between neighbours two apart
-    seen = (np.searchsorted(data, np.append(knots[1:], np.inf), "left")
-            - np.searchsorted(data, np.insert(knots[:-1], 0, -np.inf), "right"))
-    return knots[seen > 0]
-
-
-def ping_knots(case: Case) -> np.ndarray | None:
-    """A navigation knot at every ping (the random-walk navigation); None when the vessel is known
-    to stay put."""
-    ref = case.reference
-    if ref is not None and ref.stationary:
-        return None
-    return np.asarray(case.pings.time_s, dtype=float).copy()
-
-
-def walk_increments(knots: np.ndarray) -> sp.csr_matrix:
-    """(K - 1, K): the random-walk prior's rows (V_j+1 - V_j) / sqrt(t_j+1 - t_j) over the K knot
-    velocities, each an N(0, q) draw for a walk of intensity sqrt(q)."""
-    K, w = knots.size, 1.0 / np.sqrt(np.diff(knots))
-    j = np.arange(K - 1)
-    return sp.csr_matrix((np.concatenate([-w, w]), (np.concatenate([j, j]), np.concatenate([j, j + 1]))), shape=(K - 1, K))
-
-
-def janus_velocity_variance(case: Case) -> np.ndarray:
-    """(3,) variance of a four-beam velocity (north, east, down axes of the instrument) from the
-    beams' noise (error velocity) through the Janus geometry: sigma^2 diag((B^T B)^-1)."""
-    b = case.instrument.beam_directions()
-    return bt_noise_from_error_velocity(case) ** 2 * np.diag(np.linalg.pinv(b.T @ b))
-
-
-def random_walk_intensity(case: Case, velocity_m_s: np.ndarray) -> float:
-    """Starting level of the random-walk prior, sqrt(q) in m/s/sqrt(s), from the data: the per-ping
-    static (ASC) velocities' increments (``velocity_m_s``, (N, 3)), whose variance is q dt + 2 var(v)
-    with var(v) from :func:`janus_velocity_variance`; horizontal axes, robust (MAD) spread."""
-    v = velocity_m_s[:, :2]
-    t = case.pings.time_s
-    ok = np.all(np.isfinite(v), axis=1)
-    if ok.sum() < 10:
-        return 0.05
-    dv, dt = np.diff(v[ok], axis=0), np.diff(t[ok])
-    z = (dv / np.sqrt(dt)[:, None]).ravel()
-    spread2 = (1.4826 * np.median(np.abs(z - np.median(z)))) ** 2
-    var_v = float(np.mean(janus_velocity_variance(case)[:2]))
-    q = spread2 - 2 * var_v / float(np.median(dt))
-    return float(np.sqrt(max(q, 0.01 * spread2, 1e-8)))
-
-
-def vertical_velocity_level(case: Case, velocity_m_s: np.ndarray) -> float:
-    """Starting level of the vertical-velocity prior in m/s: the robust (MAD) spread of the per-ping
-    static (ASC) vertical velocities (``velocity_m_s``, (N, 3)) about zero, less the beams' noise
-    (:func:`janus_velocity_variance`)."""
-    w = velocity_m_s[:, 2]
-    w = w[np.isfinite(w)]
-    if w.size < 10:
-        return 0.02
-    spread2 = (1.4826 * np.median(np.abs(w))) ** 2
-    var_w = float(janus_velocity_variance(case)[2])
-    return float(np.sqrt(max(spread2 - var_w, 0.01 * spread2, 1e-8)))
-
-
-def navigation_slope(times: np.ndarray, knots: np.ndarray, V):
-    """Time derivative of the navigation velocity V (knots x 3) at ``times``: central differences
-    of its interpolant over half the median knot spacing (the slope of the segment a time falls in,
-    as a small shift of the interpolant sees it); linear in V, so it enters the NLP as an expression."""
-    h = 0.5 * float(np.median(np.diff(knots)))
-    return ca.mtimes((hat_basis_dm(times + h, knots) - hat_basis_dm(times - h, knots)) / (2 * h), V)
-
-
-def reference_rows(case: Case, knots: np.ndarray | None) -> np.ndarray | None:
-    """Indices of the reference samples inside the pings' span (plus one knot interval);
-    a one-line error when a moving reference has none there."""
-    ref = case.reference
-    if ref is None or ref.stationary or ref.time_s is None or ref.velocity_m_s is None:
-        return None
-    t = case.pings.time_s
-    margin = REFERENCE_MARGIN_KNOTS * (float(np.median(np.diff(knots))) if knots is not None and knots.size > 1 else 0.0)
-    inside = (ref.time_s >= t[0] - margin) & (ref.time_s <= t[-1] + margin)
-    usable = inside & np.any(np.isfinite(ref.velocity_m_s[:, :2]), axis=1)
-    if usable.sum() < 2:
-        raise ValueError(f"{case.name}: reference.time_s: expected reference samples within the pings' span "
-                         f"[{t[0]:.6g}, {t[-1]:.6g}] s, got {int(usable.sum())} usable of {ref.time_s.size} "
-                         f"(reference spans [{ref.time_s[0]:.6g}, {ref.time_s[-1]:.6g}] s)")
-    return np.flatnonzero(inside)
-
-
-def section_positions(runs: list[RunSetup]) -> None:
-    """Position of every ping along the section, 0 at the bank where the first run starts and
-    1 at the other, from the reference velocity integrated over each run and projected on the
-    survey's mean crossing direction; sets ``run.section_position``. Each run is taken to span
-    the section (a discharge transect runs bank to bank)."""
-    tracks, directions = [], []
-    for run in runs:
-        if not run.moving_reference:
-            raise ValueError(f"{run.case.name}: moving_bed 'section' needs a moving reference velocity")
-        t, v = run.reference_time_s, np.nan_to_num(run.reference_velocity_m_s[:, :2])
-        x = np.vstack([np.zeros(2), np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t)[:, None], axis=0)])
-        tracks.append((t, x))
-        directions.append(x[-1] - x[0])
-    axis = directions[0] / max(np.linalg.norm(directions[0]), 1e-9)
-    along = [np.sign(np.dot(d, axis)) or 1.0 for d in directions]
-    axis = np.sum([a * d for a, d in zip(along, directions)], axis=0)
-    axis = axis / max(np.linalg.norm(axis), 1e-9)
-    for run, (t, x) in zip(runs, tracks):
-        u = x @ axis  # every run on the same axis: a run in either direction reads 0 at the same bank
-        s = (u - u.min()) / max(u.max() - u.min(), 1e-9)
-        run.section_position = np.clip(np.interp(run.case.pings.time_s, t, s), 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -547,7 +140,7 @@ class ModelSpec:
 class SurveyModel:
     """Residuals of every run as one MX vector over the unknowns; see the module docstring.
 
-    Attributes used by the NLPs: ``unknowns`` (:class:`Unknowns`), ``x``, ``raw`` (unweighted
+    Attributes used by the NLPs: ``unknowns`` (:class:`.unknowns.Unknowns`), ``x``, ``raw`` (unweighted
     residuals, model - measurement, 0 where masked), ``channels``, ``mask``, ``g``/``lbg``/``ubg``
     (lever-arm constraints), ``r`` (4x3 lever arms in the sensor frame), ``ypr_st`` (angles as
     reported), ``heading`` (h), ``bed`` (bed parameters (n, 2)), ``assembled_nodes``.
@@ -639,7 +232,7 @@ class SurveyModel:
                 self.knot_syms.append(None)
                 continue
             K = run.knots.size
-            speed = max(_speed_guess(run), 0.05)
+            speed = max(speed_guess(run), 0.05)
             prefix = f"run{k + 1}/" if len(runs) > 1 else ""
             vk = u.add(f"velocity{k}", [f"{prefix}V{j}_{a}" for j in range(K) for a in AXES], speed, -20.0, 20.0)
             self.knot_syms.append(ca.reshape(vk, 3, K).T)
@@ -894,7 +487,7 @@ class SurveyModel:
         return {(c.run, c.name): slice(int(e - c.size), int(e)) for c, e in zip(self.channels, ends)}
 
     def initial_sigmas(self) -> dict:
-        """{(run, group): noise level} from independent estimates (:func:`initial_noise`)."""
+        """{(run, group): noise level} from independent estimates (:func:`.noise_guess.initial_noise`)."""
         out = {}
         for k, run in enumerate(self.runs):
             guess = run.noise_guess()
@@ -1100,56 +693,6 @@ class SurveyModel:
             out[:, j] = np.interp(run.knots, tj, vj)
             out[inside, j] = (sums[hi] - sums[lo])[inside] / (hi - lo)[inside]
         return out
-
-
-def _speed_guess(run: RunSetup) -> float:
-    if run.moving_reference:
-        v = run.reference_velocity_m_s[:, :2]
-        speed = np.linalg.norm(v, axis=1)
-        speed = speed[np.isfinite(speed)]
-        if speed.size:
-            return float(np.median(speed))
-    return 0.1
-
-
-def course_offset_rad(runs: list[RunSetup]) -> float:
-    """Course of the reference minus course of the static (ASC) bottom-track velocity over all
-    runs' pings, radians (circular mean); 0 without a moving reference."""
-    from .asc import asc
-
-    diffs = []
-    for run in runs:
-        if not run.moving_reference:
-            continue
-        v = asc(run.case).vessel_velocity_m_s
-        t = run.case.pings.time_s
-        tr, vr = run.reference_time_s, run.reference_velocity_m_s
-        ok_r = np.all(np.isfinite(vr[:, :2]), axis=1)
-        if ok_r.sum() < 2:
-            continue
-        g = np.column_stack([np.interp(t, tr[ok_r], vr[ok_r, j]) for j in range(2)])
-        ok = np.all(np.isfinite(v[:, :2]), axis=1) & (np.hypot(*g.T) > 0.1)
-        if ok.any():
-            diffs.append(course_difference_rad(g[ok], v[ok, :2]))
-    if not diffs or np.concatenate(diffs).size < 3:
-        return 0.0
-    return float(np.angle(np.mean(np.exp(1j * np.concatenate(diffs)))))
-
-
-def heading_centre(runs: list[RunSetup]) -> tuple[float, float]:
-    """Mean sine and cosine of the sensor heading over every run's attitude samples."""
-    psi = np.concatenate([r.case.attitude.heading_rad[np.isfinite(r.case.attitude.heading_rad)] for r in runs])
-    return (float(np.mean(np.sin(psi))), float(np.mean(np.cos(psi)))) if psi.size else (0.0, 0.0)
-
-
-def heading_span(runs: list[RunSetup]) -> float:
-    """Smallest eigenvalue of the covariance of (sin psi, cos psi) over every run's attitude
-    samples: 0.5 for headings all round the compass, 0 for one course or two opposite ones
-    (where a one-cycle compass deviation cannot be told from a moving bed)."""
-    psi = np.concatenate([r.case.attitude.heading_rad[np.isfinite(r.case.attitude.heading_rad)] for r in runs])
-    if psi.size < 3:
-        return 0.0
-    return float(np.linalg.eigvalsh(np.cov(np.vstack([np.sin(psi), np.cos(psi)])))[0])
 
 
 def default_threads(workers: int, n_starts: int) -> int:

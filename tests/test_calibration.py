@@ -126,7 +126,7 @@ def test_a_gap_in_the_pings_holds_no_knot(lake_case):
     """A minute without pings or GNSS (the instrument stopped, a file's lost ensembles): no velocity
     knot inside it, where nothing would determine it (each had been reported a direction the data do
     not fix), and the installation yaw still within its standard errors."""
-    from adcpdyn.estimators.measurement_model import knot_times
+    from adcpdyn.estimators.knots import knot_times
 
     t = lake_case.pings.time_s
     case = without_pings(lake_case, (t > t[0] + 50.0) & (t < t[0] + 110.0))

@@ -195,7 +195,7 @@ def test_auto_navigation_walks_where_a_real_boat_is_under_way():
     follows the attitude or the reference stays put."""
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
-    from adcpdyn.estimators.measurement_model import choose_navigation
+    from adcpdyn.estimators.run_setup import choose_navigation
 
     sc = get_scenario("diag_boat")
     case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=20.0)), seed=2)
@@ -216,7 +216,7 @@ def test_reference_latency_model_is_the_velocity_a_delay_earlier():
     velocity linear in time whatever the expansion point, and to second order in d - d0 otherwise."""
     import casadi as ca
 
-    from adcpdyn.estimators.measurement_model import hat_basis_dm, navigation_slope
+    from adcpdyn.estimators.knots import hat_basis_dm, navigation_slope
     from adcpdyn.models.effects import get_effect
 
     knots = np.arange(0.0, 60.0, 0.05)

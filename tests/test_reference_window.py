@@ -12,7 +12,7 @@ from adcpdyn.cases.case import Reference
 from adcpdyn.cases.io import read_case, write_case
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.measurement_model import window_basis_sparse
+from adcpdyn.estimators.knots import window_basis_sparse
 
 
 def test_window_mean_is_exact_against_fine_quadrature():

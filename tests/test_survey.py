@@ -160,7 +160,7 @@ def test_hat_basis_is_np_interp_of_the_unit_vectors_and_two_knots_per_row():
     vector (held beyond the ends, one knot alone on a knot), in every form the models take."""
     import casadi as ca
 
-    from adcpdyn.estimators.measurement_model import hat_basis, hat_basis_dm, hat_basis_sparse
+    from adcpdyn.estimators.knots import hat_basis, hat_basis_dm, hat_basis_sparse
 
     knots = np.linspace(3.0, 50.0, 9)
     t = np.concatenate([np.linspace(-2.0, 60.0, 311), knots, np.random.default_rng(1).uniform(0.0, 55.0, 200)])

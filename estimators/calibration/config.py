@@ -10,7 +10,7 @@ import numpy as np
 from ...solvers.cluster import SERIAL, check_address
 from ...solvers.multistart import SolverOptions
 from ..formulations import FORMULATIONS
-from ..measurement_model import NAVIGATION_CHOICES
+from ..run_setup import NAVIGATION_CHOICES
 
 TIMINGS = ("auto", "shallow", "deep", "exact")
 ATTITUDES = ("auto", "model", "samples")
@@ -54,7 +54,7 @@ class CalibrationConfig:
         motion, which the bottom track sees and a smooth curve does not) or ``auto`` (the random
         walk for a run whose beams take the sensor's samples and that no stationary reference
         holds still, as a real file's do; knots otherwise:
-        :func:`~adcpdyn.estimators.measurement_model.choose_navigation`).
+        :func:`~adcpdyn.estimators.run_setup.choose_navigation`).
     lever_box_m : float, optional
         Bound on every lever-arm coordinate (default: half the vessel length, else 10 m).
     installation_bound_rad : float

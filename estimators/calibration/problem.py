@@ -39,8 +39,9 @@ from ...solvers.cluster import SERIAL
 from ...solvers.multistart import MultistartResult, build_solver, expand_problem, multistart
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..statistics.hac import at_least_white, ping_bins, sandwich
-from ..measurement_model import (ANGLE_NAMES, ModelSpec, RunSetup, SurveyModel, choose_navigation,
-                                 course_offset_rad, default_threads, heading_span, knot_times, ping_knots)
+from ..knots import knot_times, ping_knots
+from ..measurement_model import ANGLE_NAMES, ModelSpec, SurveyModel, default_threads
+from ..run_setup import RunSetup, choose_navigation, course_offset_rad, heading_span
 from ..statistics.normal_equations import group_levels, redundancy
 from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
 from .config import CalibrationConfig

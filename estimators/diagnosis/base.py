@@ -27,8 +27,9 @@ from ...models.effects import get_effect
 from ..attitude_fit import fit_attitude
 from ..calibration.problem import choose_attitude
 from ..calibration.record import CalibrationRecord
-from ..measurement_model import (EffectTerm, ModelSpec, RunSetup, choose_navigation, course_offset_rad, heading_centre,
-                                 knot_times, ping_knots)
+from ..knots import knot_times, ping_knots
+from ..measurement_model import EffectTerm, ModelSpec
+from ..run_setup import RunSetup, choose_navigation, course_offset_rad, heading_centre
 from ..statistics.normal_equations import group_levels, redundancy
 from .config import DiagnosisConfig
 from .model import DiagnosisBase, Fit, GapModel, Pins, free_jacobian, velocity_columns

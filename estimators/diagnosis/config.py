@@ -14,7 +14,7 @@ import numpy as np
 from ...models.effects import CATALOG, get_effect
 from ...solvers.multistart import SolverOptions
 from ..calibration.config import ATTITUDES
-from ..measurement_model import NAVIGATION_CHOICES
+from ..run_setup import NAVIGATION_CHOICES
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,8 @@ import numpy as np
 
 from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..statistics.normal_equations import as_sparse, inverse_columns, marginal_covariance
-from .model import PRIOR_GROUPS, Fit, GapModel, free_jacobian
+from ..measurement_model import PRIOR_GROUPS
+from .model import Fit, GapModel, free_jacobian
 
 
 def covariance(fit: Fit, model: GapModel, index) -> np.ndarray:

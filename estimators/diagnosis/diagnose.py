@@ -35,7 +35,8 @@ from .base import (applicable, effect_of, effect_terms, fit_base, group_sigma, n
 from .config import DiagnosisConfig
 from .covariance import coloured_covariance
 from .heldout import cv_residuals, heldout_gap
-from .model import PRIOR_GROUPS, Fit, GapModel, residual_peaks
+from ..measurement_model import PRIOR_GROUPS
+from .model import Fit, GapModel, residual_peaks
 from .profiles import REFERENCE_DELAY, delay_profile, fixed_points, marginal_profile
 from .selection import EffectScore, confounding, preference, score_effect, significant
 from .statement import calibration_base_note, confounding_reason, not_the_base, reading_of

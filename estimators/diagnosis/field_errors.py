@@ -13,7 +13,7 @@ import numpy as np
 
 from ...cases.case import Case
 from ...cases.sound_speed import rescale_sound_speed
-from ..measurement_model import has_moving_reference
+from ..run_setup import has_moving_reference
 
 FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
     "compass_offset_deg": ("compass_offset", "deg", (2.0, 4.0)),

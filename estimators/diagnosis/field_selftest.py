@@ -19,7 +19,7 @@ from ...models.effects import get_effect
 from .base import effect_of
 from .config import DiagnosisConfig
 from .diagnose import diagnose
-from ..measurement_model import has_moving_reference
+from ..run_setup import has_moving_reference
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey, shift_signature
 from .signal_limit import own_delay_profile, signal_limit
 

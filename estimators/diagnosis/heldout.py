@@ -16,7 +16,8 @@ import numpy as np
 
 from ..statistics.hac import andrews_lags, newey_west, ping_bins
 from ..statistics.normal_equations import leave_out_predictions
-from .model import PRIOR_GROUPS, Fit, GapModel, free_jacobian, velocity_columns
+from ..measurement_model import PRIOR_GROUPS
+from .model import Fit, GapModel, free_jacobian, velocity_columns
 
 FOLD_SEED = 20261125  # the held-out blocks' dealing to folds: shuffled, the same every call
 

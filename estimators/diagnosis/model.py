@@ -26,7 +26,8 @@ import scipy.sparse as sp
 
 from ...solvers.multistart import SolverOptions, build_solver, multistart
 from ..attitude_fit import periodogram_peak
-from ..measurement_model import PRIOR_GROUPS, VELOCITY_NAME, EffectTerm, ModelSpec, SurveyModel, channel_slices, hat_basis
+from ..knots import hat_basis
+from ..measurement_model import VELOCITY_NAME, EffectTerm, ModelSpec, SurveyModel, channel_slices
 from ..statistics.normal_equations import as_sparse, log_det_normal
 
 # The per-ping models as machine code from the per-machine cache (:mod:`...solvers.compiled`) at any
