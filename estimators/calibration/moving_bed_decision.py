@@ -52,7 +52,7 @@ def moving_bed_test(velocity_m_s, se_m_s, confounded: bool, flow_m_s: float | No
     p = float(stats.chi2.sf(chi2, 2))
     out.update(speed_m_s=speed, speed_se_m_s=speed_se, chi2=chi2, p_value=p,
                percent_of_flow=100 * speed / flow_m_s if flow_m_s else None)
-    share = f" ({100 * speed / flow_m_s:.1f} % of the mean flow {flow_m_s:.2f} m/s)" if flow_m_s else ""
+    share = f" ({out['percent_of_flow']:.1f} % of the mean flow {flow_m_s:.2f} m/s)" if flow_m_s else ""
     rule = (f"the larger of {MIN_SPEED_M_S} m/s and {100 * FLOW_SHARE:g} % of the mean flow" if flow_m_s else
             f"{MIN_SPEED_M_S} m/s; no water profile gives the mean flow")
     if p < SIGNIFICANCE and speed > threshold:

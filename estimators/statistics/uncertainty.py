@@ -22,6 +22,7 @@ from scipy.sparse.linalg import splu
 RANK_RTOL = 1e-10
 UNDETERMINED_SE = 1e2  # in units of the variable scales
 WEAK_SE = 0.1  # a direction known no better than a tenth of its scale is "weakly determined"
+NAVIGATION_SHARE = 0.9  # a direction this much (squared, unit vector) on the boat's own velocity unknowns
 LEAK_RTOL = 0.01  # a quantity depends on an undetermined direction when its gradient leaks >1% into it
 AXIS_WORDS = {"vessel": {0: "x_b (bow / roll axis)", 1: "y_b (starboard / pitch axis)", 2: "z_b (down / yaw axis)"},
               "transducer": {0: "the head's x_t (towards transducer 2)", 1: "the head's y_t (towards transducer 3)",
@@ -161,9 +162,10 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
                           "se_along": float(s_d * np.linalg.norm(vec_x)) if np.isfinite(s_d) else None,
                           "vector": {names[i]: float(unit[i]) for i in np.flatnonzero(np.abs(unit) > 1e-3)}})
     navigation = context.get("navigation")
+    boat_names = set() if navigation is None else {names[i] for i in np.flatnonzero(navigation)}
     for kind, label in (("unobservable", "not determined by the data"), ("weak", "only weakly determined")):
         found = [u for u in unobs if u["kind"] == kind]
-        boat = [u for u in found if navigation is not None and _on_navigation(u["vector"], names, navigation)]
+        boat = [u for u in found if sum(w * w for n, w in u["vector"].items() if n in boat_names) >= NAVIGATION_SHARE]
         said = [u["words"] for u in found if not any(u is b for b in boat)]
         items = ([_navigation_words(boat)] if boat else []) + [
             w + (f" ({said.count(w)} directions)" if said.count(w) > 1 else "") for w in dict.fromkeys(said)]
@@ -171,14 +173,6 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
             warns.append(f"{len(found)} direction(s) of the unknowns {label} (their coefficients in the "
                          "result's `unobservable` list): " + "; ".join(items[:6]) + ("; ..." if len(items) > 6 else ""))
     return Uncertainty(cov_z, se, lam, null_z, unobs, warns)
-
-
-NAVIGATION_SHARE = 0.9  # a direction this much (squared, unit vector) on the boat's own velocity unknowns
-
-
-def _on_navigation(vector: dict, names: list, navigation: np.ndarray) -> bool:
-    idx = {n: i for i, n in enumerate(names)}
-    return sum(w * w for n, w in vector.items() if navigation[idx[n]]) >= NAVIGATION_SHARE
 
 
 def _navigation_words(directions: list) -> str:
