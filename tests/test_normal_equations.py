@@ -538,3 +538,9 @@ def test_eliminating_local_unknowns_gives_the_dense_uncertainty():
     assert list(elim.determined_mask(derived)) == list(dense.determined_mask(derived)) == [True, True, False]
     with pytest.raises(ValueError, match="only the unknowns kept"):
         elim.cov_columns([0])
+    # the velocities marked as the boat's own (a mask over all unknowns) follow the elimination
+    on_boat = uncertainty_eliminating(sp.csr_matrix(J), A, names, scale, local, {"navigation": local})
+    said = [w for w in on_boat.warnings if "not determined" in w]  # weak ones differ: the velocities' are gone
+    assert len(said) == 1 and said[0].startswith("1 direction(s)") and said[0].endswith(": d alone")
+    with pytest.raises(ValueError, match="navigation"):
+        uncertainty(J, A, names, scale, {"navigation": local[:-1]})

@@ -162,6 +162,8 @@ def uncertainty(J: np.ndarray, A: np.ndarray | None, names: list, scale: np.ndar
                           "se_along": float(s_d * np.linalg.norm(vec_x)) if np.isfinite(s_d) else None,
                           "vector": {names[i]: float(unit[i]) for i in np.flatnonzero(np.abs(unit) > 1e-3)}})
     navigation = context.get("navigation")
+    if navigation is not None and len(navigation) != len(names):
+        raise ValueError(f"context['navigation']: expected a mask of {len(names)} unknowns, got {len(navigation)}")
     boat_names = set() if navigation is None else {names[i] for i in np.flatnonzero(navigation)}
     for kind, label in (("unobservable", "not determined by the data"), ("weak", "only weakly determined")):
         found = [u for u in unobs if u["kind"] == kind]
@@ -213,8 +215,11 @@ def uncertainty_eliminating(J, A: np.ndarray | None, names: list, scale: np.ndar
     G_VS = G_V[:, S].toarray()
     X = lu.solve(G_VS)
     F = G[S][:, S].toarray() - G_VS.T @ X
+    kept = dict(context or {})
+    if kept.get("navigation") is not None:  # per-unknown masks follow the unknowns kept
+        kept["navigation"] = np.asarray(kept["navigation"], dtype=bool)[S]
     red = uncertainty(None, None if A is None or not np.size(A) else np.asarray(A)[:, S], [names[i] for i in S],
-                      np.asarray(scale)[S], context, information=0.5 * (F + F.T))
+                      np.asarray(scale)[S], kept, information=0.5 * (F + F.T))
     n = len(names)
     se = np.empty(n)
     se[S] = red.se_z
