@@ -223,6 +223,31 @@ def test_a_calibrated_run_under_another_name_keeps_its_calibrated_bed():
     assert renamed.base["pinned"]["moving_bed_north"] == calibration.moving_bed_velocity_m_s[0]
 
 
+@pytest.mark.slow  # 10 s: `make test-slow`
+@pytest.mark.skipif(not (REAL / "RiverPro_test01.PD0").is_file(), reason="real file absent")
+def test_long_held_out_blocks_on_a_random_walk_see_a_compass_offset():
+    """RiverPro_test01 calibrated on itself, a 4-deg compass offset written into its headings: on a
+    random walk the 2-s held-out blocks of the reference are bridged by the walk from the reference
+    next to them, so the ping-scale evidence misses what beams and GNSS disagree on; the 20-s blocks
+    are predicted from the beams, and the offset is named there, its estimate within 3 SE of 4 deg."""
+    from adcpdyn import api
+    from adcpdyn.estimators.diagnosis.field_errors import inject
+    from adcpdyn.estimators.diagnosis.selection import ping_evidence
+
+    case = api.import_file(REAL / "RiverPro_test01.PD0").case
+    calibration = as_record(api.calibrate(case, n_starts=4))
+    config = DiagnosisConfig(effects=("compass_offset",), navigation="random_walk")
+    r = diagnose(inject(case, "compass_offset_deg", 4.0), config, calibration=calibration)
+    s = r.ranking[0]
+    assert r.verdict == "compass_offset" and s["shrink_fraction"] > config.min_shrink_walk and not s["ping"]
+    (base, fit_base), (model, fit) = r.fits["base"], r.fits["compass_offset"]
+    at_ping = ping_evidence(model, cv_residuals(model, fit, config.cv_folds, config.cv_block_s), base,
+                            cv_residuals(base, fit_base, config.cv_folds, config.cv_block_s), r.noise_levels)
+    assert at_ping["shrink_fraction"] < config.min_shrink_walk and at_ping["heldout_z"] < config.heldout_z_walk
+    est, se = np.degrees(s["params"]["compass_offset.A_rad"]), np.degrees(s["params_se"]["compass_offset.A_rad"])
+    assert abs(est - 4.0) < 3 * se
+
+
 def test_effect_free_case_gets_none():
     case = simulate(short_scenario(), seed=7)
     r = diagnose(case, DiagnosisConfig(effects=FEW))
@@ -564,6 +589,15 @@ def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement(
     # an unknown stopped at a bound of its plausible range: standing in for something else, on either base
     held = dataclasses.replace(s, at_bound=["heave.omega_rad_s"], shrink_fraction=0.3)
     assert not significant(held, -0.02, config, walk=True) and not significant(held, 0.4, config, walk=False)
+    # the ping-scale blocks' evidence counts beside the long blocks' on a random walk, never on knots
+    quiet = dataclasses.replace(s, heldout_z=0.0, shrink_fraction=0.0, gap_after=0.4)
+    assert not significant(quiet, 0.4, config, walk=True)
+    at_ping = dataclasses.replace(quiet, ping={"gap_before": 0.4, "gap_after": 0.28, "shrink_fraction": 0.3, "heldout_z": 0.5})
+    assert significant(at_ping, 0.4, config, walk=True) and not significant(at_ping, 0.4, config, walk=False)
+    assert not significant(dataclasses.replace(at_ping, delta_bic_hac=-5.0), 0.4, config, walk=True)
+    assert config.block_s(walk=True) == config.cv_block_walk_s > config.block_s(walk=False) == config.cv_block_s
+    with pytest.raises(ValueError, match="cv_block_walk_s: expected a positive duration"):
+        DiagnosisConfig(cv_block_walk_s=0.0)
     with pytest.raises(ValueError, match="min_gain_walk: expected a held-out excess >= 0"):
         DiagnosisConfig(min_gain_walk=-0.1)
     with pytest.raises(ValueError, match="heldout_z_walk: expected a finite"):

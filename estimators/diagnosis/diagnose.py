@@ -38,7 +38,8 @@ from .heldout import cv_residuals, heldout_gap
 from ..measurement_model import PRIOR_GROUPS
 from .model import Fit, GapModel, residual_peaks
 from .profiles import REFERENCE_DELAY, delay_profile, fixed_points, marginal_profile
-from .selection import EffectScore, confounding, preference, score_effect, significant
+from .selection import (EffectScore, confounding, needs_ping_evidence, ping_evidence, preference, score_effect,
+                        significant)
 from .statement import calibration_base_note, confounding_reason, not_the_base, reading_of
 
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
@@ -151,7 +152,19 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     n_obs = int((base_model.mask > 0).sum())
     selected_terms, selected, confounded, ranking, alternatives = [], [], [], [], []
     current_name, current = "base", (base_model, base_fit)
-    cv = {"base": cv_residuals(base_model, base_fit, config.cv_folds, config.cv_block_s)}
+    walk = base_model.random_walk  # a velocity per ping: long held-out blocks, a smaller shrink share or a paired gain
+    block_s = config.block_s(walk)
+    cv_ping = {}  # on a random walk, the ping-scale blocks' held-out residuals, where an effect needs them
+
+    def held_out(model, f) -> np.ndarray:
+        return cv_residuals(model, f, config.cv_folds, block_s)
+
+    def at_ping_scale(label) -> np.ndarray:
+        if label not in cv_ping:
+            cv_ping[label] = cv_residuals(*fits[label], config.cv_folds, config.cv_block_s)
+        return cv_ping[label]
+
+    cv = {"base": held_out(base_model, base_fit)}
     given, given_covariance = {}, {}
     if config.given:  # the run's own effects first: every candidate is then judged on top of them
         for name in config.given:
@@ -166,7 +179,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
         fits[current_name] = current
-        cv[current_name] = cv_residuals(*current, config.cv_folds, config.cv_block_s)
+        cv[current_name] = held_out(*current)
         gm, gf = current
         idx = [gm.names.index(n) for n in gm.effect_names]
         cov = coloured_covariance(gf, gm, idx)
@@ -175,7 +188,6 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         # how the given unknowns co-vary (a compass deviation's A, B, C on one course): what a shift of them is judged by
         given_covariance = {"names": list(gm.effect_names), "matrix": cov.tolist()}
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
-    walk = base_model.random_walk  # a velocity per ping: a smaller shrink share, or a paired held-out gain
 
     def gain(s: EffectScore) -> float:  # the BIC change that decides: the coloured-residual one
         return s.delta_bic_hac
@@ -189,20 +201,20 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
 
         def one(name, terms=tuple(selected_terms), start=current[1]):
             model, f = refit(list(terms), name, start)
-            held_out = cv_residuals(model, f, config.cv_folds, config.cv_block_s)
+            residuals = held_out(model, f)
             if progress:
                 progress(labels[name])
-            return model, f, held_out
+            return model, f, residuals
 
         # the candidates' refits are independent: threads (CasADi computes without the GIL); the reference delay's
         # profile (a dozen refits) first, so the pool packs the single refits around it instead of after it
         with ThreadPoolExecutor(max_workers=max(1, min(config.workers, len(todo)))) as pool:
             futures = {name: pool.submit(one, name) for name in sorted(todo, key=lambda n: n != "reference_latency")}
             done = [futures[name].result() for name in todo]
-        for name, (model, f, held_out) in zip(todo, done):
+        for name, (model, f, residuals) in zip(todo, done):
             tried[name] = (labels[name], model, f)
             fits[labels[name]] = (model, f)
-            cv[labels[name]] = held_out
+            cv[labels[name]] = residuals
         if round_ == 1:  # noise levels: independent ones, lowered to the best level any model reached
             for model, f in [v[1:] for v in tried.values()] + [fits[start_name]]:
                 levels = variance_components(model, f) if model.random_walk else group_sigma(model, f.raw)
@@ -214,7 +226,9 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         scores = []
         for name, (label, model, f) in tried.items():
             s = score_effect(name, model, f, current[0], current[1], ref_gap, cv[label], cv[current_name], noise, n_obs,
-                       config, round_)
+                             config, round_)
+            if walk and needs_ping_evidence(s, ref_gap, config):  # a latency or heave may show at the ping scale only
+                s.ping = ping_evidence(model, at_ping_scale(label), current[0], at_ping_scale(current_name), noise)
             mine = [n for n in model.effect_names if effect_of(n) == name]
             others = against + [n for n in model.effect_names if n not in mine]
             s.confounded_with, s.confounded_share = confounding(model, f, mine, others, config.confounded_share)
@@ -309,7 +323,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     if len(cases) > 1 and selected:
         runs_fold = base_model.row_run.copy()
         for label, (m, f) in (("base", (base_model, base_fit)), (current_name, current)):
-            rv = cv_residuals(m, f, config.cv_folds, config.cv_block_s, fold_of=runs_fold)
+            rv = cv_residuals(m, f, config.cv_folds, block_s, fold_of=runs_fold)
             run_holdout[label] = heldout_gap(m, rv, noise)[0]
     base_info = {"success": base_fit.success, "status": base_fit.status, "iterations": base_fit.iterations,
                  "attitude_source": ", ".join(dict.fromkeys("samples" if r.attitude_source == "samples" else "model"

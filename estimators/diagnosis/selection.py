@@ -51,19 +51,26 @@ class EffectScore:
     round: int = 1
     at_bound: list = field(default_factory=list)  # unknowns stopped at a bound of their range: not determined there
     detection_limit: dict = field(default_factory=dict)  # per unknown: the smallest size this file's selection takes
-    heldout_z: float = float("nan")  # held-out gap change over its HAC standard error (random-walk base): reported,
-    # not a gate (as an alternative to the shrink it named winriver02's clean reference lever arm at z 3.2)
+    heldout_z: float = float("nan")  # held-out gap change over its HAC standard error (random-walk base)
+    ping: dict = field(default_factory=dict)  # random-walk base: the held-out evidence on ping-scale blocks
+    # (gap_before, gap_after, shrink_fraction, heldout_z) where the long blocks show none (:func:`needs_ping_evidence`)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
 
+def _shrink(ref_gap: float, gap_after: float) -> float:
+    return (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
+
+
 def score_effect(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, noise, n_obs, config, round_) -> EffectScore:
+    """The effect's model (``model``, ``fit``, held-out residuals ``cv``) against the current one
+    (``ref_*``): likelihood ratio, BICs, the held-out gap's shrink and paired z, SEs, detection limits."""
     k = len(model.effect_index) - len(ref_model.effect_index)
     dll = fit.log_likelihood(model) - ref_fit.log_likelihood(ref_model)
     dbic = -2.0 * dll + k * np.log(n_obs)
     gap_after, _ = heldout_gap(model, cv, noise)
-    shrink = (ref_gap - gap_after) / ref_gap if ref_gap > 0 else 0.0
+    shrink = _shrink(ref_gap, gap_after)
     mine = [n for n in model.effect_names if effect_of(n) == name]
     idx = [model.names.index(n) for n in mine]
     values = {n: float(fit.x[i]) for n, i in zip(mine, idx)}
@@ -89,6 +96,28 @@ def score_effect(name, model, fit, ref_model, ref_fit, ref_gap, cv, ref_cv, nois
         heldout_z=heldout_improvement_z(model, cv, ref_model, ref_cv, noise))
 
 
+def ping_evidence(model, cv, ref_model, ref_cv, noise) -> dict:
+    """The held-out evidence on ping-scale blocks (``cv``, ``ref_cv``: the two models' held-out
+    residuals there), for :attr:`EffectScore.ping`."""
+    before, after = heldout_gap(ref_model, ref_cv, noise)[0], heldout_gap(model, cv, noise)[0]
+    return {"gap_before": float(before), "gap_after": float(after), "shrink_fraction": float(_shrink(before, after)),
+            "heldout_z": float(heldout_improvement_z(model, cv, ref_model, ref_cv, noise))}
+
+
+def _held_out(config: DiagnosisConfig, shrink: float, before: float, after: float, z: float) -> bool:
+    """Out-of-sample evidence on a random-walk base: a share of a gap there is, or a paired
+    improvement that is also a practical one."""
+    return bool((shrink >= config.min_shrink_walk and before > config.min_gap)
+                or (z > config.heldout_z_walk and before - after >= config.min_gain_walk))
+
+
+def needs_ping_evidence(s: EffectScore, ref_gap: float, config: DiagnosisConfig) -> bool:
+    """Whether the ping-scale blocks can still decide (random-walk base): the coloured BIC passes,
+    no unknown at a bound, and the long blocks show nothing; otherwise they are not computed."""
+    return bool(not s.at_bound and s.delta_bic_hac < -config.bic_margin
+                and not _held_out(config, s.shrink_fraction, ref_gap, s.gap_after, s.heldout_z))
+
+
 def at_bounds(effect: str, values: dict, scales: dict | None = None) -> list:
     """The effect's unknowns (full names) whose estimate sits on a bound of the effect's range: the
     data pushed them there, so their value and its standard error say nothing. "On" as the fit
@@ -110,15 +139,17 @@ def significant(s: EffectScore, ref_gap: float, config: DiagnosisConfig, walk: b
     """Whether an effect is significant against the current model (held-out gap ``ref_gap``): its
     BIC better by the margin (the coloured one on a random-walk base), and out of sample a share of
     the held-out gap removed, on a random-walk base alternatively a paired held-out improvement.
-    Never with an unknown stopped at a bound of the effect's plausible range (``at_bound``): the
+    On a random walk the held-out evidence may come from the long blocks or the ping-scale ones
+    (``s.ping``). Never with an unknown stopped at a bound of the effect's plausible range (``at_bound``): the
     data want it beyond anything the effect can be, so it stands in for something else (a 5.7-deg
     beam-angle error fitting a bed's slant ranges on a real transect without GNSS)."""
     if s.at_bound:
         return False
     if walk:
+        at_ping = bool(s.ping) and _held_out(config, s.ping["shrink_fraction"], s.ping["gap_before"],
+                                             s.ping["gap_after"], s.ping["heldout_z"])
         return bool(s.delta_bic_hac < -config.bic_margin
-                    and ((s.shrink_fraction >= config.min_shrink_walk and ref_gap > config.min_gap)
-                         or (s.heldout_z > config.heldout_z_walk and ref_gap - s.gap_after >= config.min_gain_walk)))
+                    and (_held_out(config, s.shrink_fraction, ref_gap, s.gap_after, s.heldout_z) or at_ping))
     return bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink and ref_gap > config.min_gap)
 
 

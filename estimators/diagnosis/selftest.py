@@ -95,7 +95,7 @@ def oracle_shrink(result, label: str, params: dict, config: DiagnosisConfig) -> 
     if fixed is None:
         return None
     pinned = model.solve(fit.x.copy(), fit.sigma, fixed=fixed)
-    cv = cv_residuals(model, pinned, config.cv_folds, config.cv_block_s)
+    cv = cv_residuals(model, pinned, config.cv_folds, config.block_s(model.random_walk))
     gap, _ = heldout_gap(model, cv, result.noise_levels)
     return (result.gap_before - gap) / result.gap_before if result.gap_before > 0 else None
 
