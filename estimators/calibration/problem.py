@@ -387,7 +387,7 @@ class CalibrationProblem:
                    "navigation": model.velocity_columns()}
         if self.walk:  # a velocity per ping: eliminated first, nothing of size unknowns x unknowns formed
             unc = uncertainty_eliminating(J, Jg[eq] if eq.any() else None, self.names, self.scale,
-                                          model.velocity_columns(), context)
+                                          context["navigation"], context)
         else:
             unc = uncertainty(J, Jg[eq] if eq.any() else None, self.names, self.scale, context, information=information)
         x = ms.x * self.scale

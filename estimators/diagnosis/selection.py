@@ -111,11 +111,15 @@ def _held_out(config: DiagnosisConfig, shrink: float, before: float, after: floa
                 or (z > config.heldout_z_walk and before - after >= config.min_gain_walk))
 
 
+def _in_sample(s: EffectScore, config: DiagnosisConfig) -> bool:
+    """The in-sample half of significance: the (coloured) BIC better by the margin, no unknown at a bound."""
+    return bool(not s.at_bound and s.delta_bic_hac < -config.bic_margin)
+
+
 def needs_ping_evidence(s: EffectScore, ref_gap: float, config: DiagnosisConfig) -> bool:
-    """Whether the ping-scale blocks can still decide (random-walk base): the coloured BIC passes,
-    no unknown at a bound, and the long blocks show nothing; otherwise they are not computed."""
-    return bool(not s.at_bound and s.delta_bic_hac < -config.bic_margin
-                and not _held_out(config, s.shrink_fraction, ref_gap, s.gap_after, s.heldout_z))
+    """Whether the ping-scale blocks can still decide (random-walk base): the in-sample test passes
+    and the long blocks show nothing; otherwise they are not computed."""
+    return _in_sample(s, config) and not _held_out(config, s.shrink_fraction, ref_gap, s.gap_after, s.heldout_z)
 
 
 def at_bounds(effect: str, values: dict, scales: dict | None = None) -> list:
@@ -143,14 +147,13 @@ def significant(s: EffectScore, ref_gap: float, config: DiagnosisConfig, walk: b
     (``s.ping``). Never with an unknown stopped at a bound of the effect's plausible range (``at_bound``): the
     data want it beyond anything the effect can be, so it stands in for something else (a 5.7-deg
     beam-angle error fitting a bed's slant ranges on a real transect without GNSS)."""
-    if s.at_bound:
+    if not _in_sample(s, config):
         return False
     if walk:
         at_ping = bool(s.ping) and _held_out(config, s.ping["shrink_fraction"], s.ping["gap_before"],
                                              s.ping["gap_after"], s.ping["heldout_z"])
-        return bool(s.delta_bic_hac < -config.bic_margin
-                    and (_held_out(config, s.shrink_fraction, ref_gap, s.gap_after, s.heldout_z) or at_ping))
-    return bool(s.delta_bic_hac < -config.bic_margin and s.shrink_fraction >= config.min_shrink and ref_gap > config.min_gap)
+        return _held_out(config, s.shrink_fraction, ref_gap, s.gap_after, s.heldout_z) or at_ping
+    return bool(s.shrink_fraction >= config.min_shrink and ref_gap > config.min_gap)
 
 
 SHRINK_TIE = 0.01  # held-out shrinks this close predict alike: the BIC decides between them
