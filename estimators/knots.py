@@ -144,9 +144,15 @@ def vertical_velocity_level(case: Case, velocity_m_s: np.ndarray) -> float:
     return float(np.sqrt(max(spread2 - var_w, 0.01 * spread2, 1e-8)))
 
 
-def navigation_slope(times: np.ndarray, knots: np.ndarray, V):
-    """Time derivative of the navigation velocity V (knots x 3) at ``times``: central differences
-    of its interpolant over half the median knot spacing (the slope of the segment a time falls in,
-    as a small shift of the interpolant sees it); linear in V, so it enters the NLP as an expression."""
+def slope_basis_sparse(times, knots) -> sp.csr_matrix:
+    """Weights of the knot velocities in the interpolant's time derivative at ``times``: central
+    differences over half the median knot spacing (the slope of the segment a time falls in, as a
+    small shift of the interpolant sees it)."""
     h = 0.5 * float(np.median(np.diff(knots)))
-    return ca.mtimes((hat_basis_dm(times + h, knots) - hat_basis_dm(times - h, knots)) / (2 * h), V)
+    return sp.csr_matrix((hat_basis_sparse(np.asarray(times) + h, knots) - hat_basis_sparse(np.asarray(times) - h, knots)) / (2 * h))
+
+
+def navigation_slope(times: np.ndarray, knots: np.ndarray, V):
+    """Time derivative of the navigation velocity V (knots x 3) at ``times``
+    (:func:`slope_basis_sparse`); linear in V, so it enters the NLP as an expression."""
+    return ca.mtimes(sparse_dm(slope_basis_sparse(times, knots)), V)

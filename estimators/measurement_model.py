@@ -26,6 +26,7 @@ dropped), so noise levels, chi-square, standard errors and residual colour are p
 
 from __future__ import annotations
 
+import copy
 import os
 import re
 from dataclasses import dataclass
@@ -44,7 +45,8 @@ from ..models.rotations import euler_matrix, euler_matrix_and_rate, unskew
 from ..models.sensors import compass_correction, reference_point_velocity
 from ..solvers.compiled import compiled
 from .formulations import AXES, lever_block
-from .knots import hat_basis, hat_basis_dm, hat_basis_sparse, navigation_slope, sparse_dm, walk_increments, window_basis_sparse
+from .knots import hat_basis, hat_basis_dm, hat_basis_sparse, sparse_dm, walk_increments, window_basis_sparse
+from .reference_rows import ROTATION_STEP_S, as_constants, reference_numbers
 from .row_jacobian import RowBlock, RowJacobian
 from .run_setup import Channel, RunSetup, heading_centre, section_positions, speed_guess
 from .unknowns import Unknowns, attitude_bounds
@@ -57,7 +59,6 @@ MOVING_BEDS = ("off", "constant", "section")
 ANGLE_NAMES = ("installation_yaw", "installation_pitch", "installation_roll")
 HEADING_NAMES = ("heading_misalignment", "compass_deviation_sin", "compass_deviation_cos")
 BED_SCALE_M_S = 0.05
-ROTATION_STEP_S = 0.05  # central-difference step of the reference point's rotational velocity (its slope)
 
 
 def channel_slices(channels: list[tuple[str, int]]) -> dict:
@@ -293,16 +294,17 @@ class SurveyModel:
         return ca.Function("attitude", [t, P], [ca.vertcat(ypr_s[0] + delta, tilt), Lam, dLam, Omega, unskew(Omega)],
                            ["t", "p"], ["ypr", "Lambda", "dLambda_dt", "Omega", "omega"])
 
-    def _p_rows(self, k: int, times) -> ca.MX:
+    def _p_rows(self, k: int, times, segments=None) -> ca.MX:
         """Attitude parameters of the beams' attitude (:meth:`_true_attitude_function`) for rows at
-        ``times`` (columns): the model's, or each row's sample segment; then the heading correction
-        and the sample effects' unknowns."""
+        ``times`` (columns): the model's, or each row's sample segment (``segments`` where given: the
+        segments as the model takes them); then the heading correction and the sample effects' unknowns."""
         run = self.runs[k]
         extra = ([self.heading] if self.heading is not None else []) + [th for _, th in self._sample_terms(k)]
         if run.attitude_source == "samples":
             # the segment about t + shift (its own clock: a latency th then evaluates it at t + th)
-            p = ca.MX(ca.DM(run.samples.params_at(np.asarray(times) + run.sample_shift_s, run.sample_tilt_lead_s)))
-            return ca.vertcat(p, *[ca.repmat(x, 1, len(times)) for x in extra]) if extra else p
+            p = ca.MX(ca.DM(run.samples.params_at(np.asarray(times) + run.sample_shift_s, run.sample_tilt_lead_s))
+                      if segments is None else segments)
+            return ca.vertcat(p, *[ca.repmat(x, 1, p.shape[1]) for x in extra]) if extra else p
         return ca.vertcat(self.attitude_params[k], *extra)
 
     def bed_at(self, k: int, n: int):
@@ -322,12 +324,68 @@ class SurveyModel:
             return np.ones((N, n_bed))
         return hat_basis(self.runs[k].section_position, np.linspace(0, 1, n_bed))
 
-    def _window_difference(self, k: int, w: np.ndarray, output: int) -> ca.MX:
-        """(X(b) - X(a)) / (b - a) over windows [a, b] (rows of ``w``) of the beams' attitude output
+    def _reference_attitude(self, k: int, data: dict, key: str, output: int, fast=lambda f: f) -> ca.MX:
+        """The beams' attitude output ``output`` (2: dLambda/dt) at the reference rows' times ``key`` of
+        ``data`` (:meth:`_reference_data`), 3 x 3L as the mapped attitude gives it."""
+        return fast(self.attitude_true[k]).map(data[key].shape[1])(data[key], self._p_rows(k, None, data.get("segment " + key)))[output]
+
+    def _window_difference(self, k: int, data: dict, output: int) -> ca.MX:
+        """(X(b) - X(a)) / (b - a) over the reference's windows [a, b] of the beams' attitude output
         ``output`` (1: Lambda, 2: dLambda/dt), 3 x 3L as the mapped attitude gives it."""
-        att_c, L = self.attitude_true[k], w.shape[0]
-        ends = [att_c.map(L)(ca.DM(w[:, j]).T, self._p_rows(k, w[:, j]))[output] for j in (0, 1)]
+        w = self.runs[k].reference_window_s  # its length does not shift
+        ends = [self._reference_attitude(k, data, key, output) for key in ("a", "b")]
         return ca.times(ends[1] - ends[0], ca.repmat(ca.DM(np.repeat(1.0 / (w[:, 1] - w[:, 0]), 3)).T, 3, 1))
+
+    def _shifts_reference(self, k: int) -> bool:
+        return any(getattr(e, "shifts_reference", False) for e, _ in self.terms_of(k))
+
+    def _fast(self, f: ca.Function) -> ca.Function:
+        """A per-ping model as machine code where the model is compiled (the gradient's sweep too)."""
+        return compiled(f, reverse=True) if self.compiled else f
+
+    def _reference_rows(self, k: int) -> list:
+        """Run k's reference rows (north, east, down: model - measurement), taken at t - its shift, the
+        time each sample holds (a reference latency's current estimate)."""
+        run, ctx, V = self.runs[k], self.contexts[k], self.knot_syms[k]
+        L, v_meas = run.reference_time_s.size, run.reference_velocity_m_s
+        data = as_constants(reference_numbers(run, self._shifts_reference(k)))
+        p_ref = ca.DM(self.reference_point_sensor(run.case))
+        v_model = ca.mtimes(data["basis"], V)  # the navigation there (its mean over each window)
+        if run.reference_window_s is None:  # instantaneous samples
+            dLam = self._reference_attitude(k, data, "t", 2, self._fast)
+            if "slope" in data:  # d/dt of the antenna's velocity
+                rot = [REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), self._reference_attitude(k, data, key, 2),
+                                                 ca.repmat(p_ref, 1, L)) for key in ("t-", "t+")]
+                ctx.reference_slope = ca.mtimes(data["slope"], V) + ca.transpose(rot[1] - rot[0]) / (2 * ROTATION_STEP_S)
+        else:  # means over windows (differenced positions): the antenna's displacement over each window
+            dLam = self._window_difference(k, data, 1)  # (Lambda(b) - Lambda(a)) / (b - a)
+            if "slope" in data:  # d/dt of a window mean: (x(b) - x(a)) / (b - a)
+                rot = REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), self._window_difference(k, data, 2),
+                                                ca.repmat(p_ref, 1, L))
+                ctx.reference_slope = ca.mtimes(data["slope"], V) + ca.transpose(rot)
+        for e, th in self.terms_of(k):
+            v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
+        v_ref = self._fast(REFERENCE_VELOCITY).map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
+        return [ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]) for j in range(3)]
+
+    def at_reference_shift(self, runs: list[RunSetup]) -> "SurveyModel":
+        """This model with ``runs`` (these runs at other reference shifts): the reference rows rebuilt,
+        everything else (unknowns, channels, the other rows' expressions) shared."""
+        other = copy.copy(self)
+        other.runs = list(runs)
+        other.contexts = [copy.copy(c) for c in self.contexts]
+        other.raw_parts = list(self.raw_parts)
+        for k, run in enumerate(other.runs):
+            other.contexts[k].reference_shift_s = run.reference_shift_s
+            if run.moving_reference:
+                i = self.reference_part(k)
+                other.raw_parts[i:i + 3] = other._reference_rows(k)
+        other.raw = ca.vertcat(*other.raw_parts)
+        return other
+
+    def reference_part(self, k: int) -> int:
+        """Index of run k's first reference row channel (north) in ``channels`` and ``raw_parts``."""
+        return next(i for i, c in enumerate(self.channels) if c.run == k and c.name == "reference_north")
 
     def _build_residuals(self):
         models, channels = [], []
@@ -338,7 +396,7 @@ class SurveyModel:
             N = pings.n
             att, att_c = self.attitude_sensor[k], self.attitude_true[k]
             terms, ctx = self.terms_of(k), self.contexts[k]
-            fast = (lambda f: compiled(f, reverse=True)) if self.compiled else (lambda f: f)  # the gradient's sweep too
+            fast = self._fast
             if run.attitude_source == "model":  # the sensor's own readings of the motion model (and its faults)
                 a = case.attitude
                 M = a.time_s.size
@@ -402,35 +460,10 @@ class SurveyModel:
             if run.moving_reference:
                 t_ref, v_meas = run.reference_time_s, run.reference_velocity_m_s
                 L = t_ref.size
-                t_nav = t_ref - run.reference_shift_s  # the time each sample holds (a reference latency's estimate)
-                p_ref = ca.DM(self.reference_point_sensor(case))
-                shifts = any(getattr(e, "shifts_reference", False) for e, _ in terms)
-                if run.reference_window_s is None:  # instantaneous samples
-                    dLam = fast(att_c).map(L)(ca.DM(t_nav).T, self._p_rows(k, t_nav))[2]
-                    v_model = ca.mtimes(hat_basis_dm(t_nav, run.knots), V)
-                    if shifts:  # d/dt of the antenna's velocity
-                        rot = [REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), att_c.map(L)(ca.DM(t_nav + dt).T,
-                                                                                         self._p_rows(k, t_nav + dt))[2],
-                                                         ca.repmat(p_ref, 1, L)) for dt in (-ROTATION_STEP_S, ROTATION_STEP_S)]
-                        ctx.reference_slope = (navigation_slope(t_nav, run.knots, V)
-                                               + ca.transpose(rot[1] - rot[0]) / (2 * ROTATION_STEP_S))
-                else:  # means over windows (differenced positions): the antenna's displacement over each window
-                    w = run.reference_window_s - run.reference_shift_s
-                    dLam = self._window_difference(k, w, 1)  # (Lambda(b) - Lambda(a)) / (b - a)
-                    v_model = ca.mtimes(sparse_dm(window_basis_sparse(w, run.knots)), V)
-                    if shifts:  # d/dt of a window mean: (x(b) - x(a)) / (b - a)
-                        ends = [hat_basis_sparse(w[:, j], run.knots) for j in (0, 1)]
-                        rot = REFERENCE_VELOCITY.map(L)(ca.DM.zeros(3, L), self._window_difference(k, w, 2),
-                                                        ca.repmat(p_ref, 1, L))
-                        ctx.reference_slope = (ca.mtimes(sparse_dm(sp.diags(1.0 / (w[:, 1] - w[:, 0])) @ (ends[1] - ends[0])), V)
-                                               + ca.transpose(rot))
-                for e, th in terms:
-                    v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
-                v_ref = fast(REFERENCE_VELOCITY).map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
+                models += self._reference_rows(k)
                 covered = run.covered(t_ref)
-                for j in range(3):
-                    models.append(ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]))
-                    channels.append(Channel(k, f"reference_{NED[j]}", t_ref, (np.isfinite(v_meas[:, j]) & covered).astype(float)))
+                channels += [Channel(k, f"reference_{NED[j]}", t_ref, (np.isfinite(v_meas[:, j]) & covered).astype(float))
+                             for j in range(3)]
                 n_nodes += att_c.n_instructions() * L
             if run.random_walk:  # the priors: horizontal increments over sqrt(dt), vertical levels
                 t_mid = 0.5 * (run.knots[1:] + run.knots[:-1])
@@ -443,6 +476,7 @@ class SurveyModel:
         if self.has_prior:  # N(0, prior^2) on B and C: a pseudo-run of its own, outside the runs' time bins
             models.append(self.heading[1:3])
             channels.append(Channel(len(self.runs), "prior_compass_deviation", np.zeros(2), np.ones(2)))
+        self.raw_parts = models  # one expression per channel
         self.raw = ca.vertcat(*models)
         self.channels = channels
         self.sigma_keys = list(dict.fromkeys((c.run, c.group) for c in channels))  # (run, group), in order

@@ -602,3 +602,38 @@ def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement(
         DiagnosisConfig(min_gain_walk=-0.1)
     with pytest.raises(ValueError, match="heldout_z_walk: expected a finite"):
         DiagnosisConfig(heldout_z_walk=float("nan"))
+
+
+@pytest.mark.parametrize("reference_from", ["velocity", "positions"])
+def test_a_model_at_another_reference_shift_is_the_model_built_there(reference_from):
+    """The reference delay's profile moves a model's reference rows to each delay without building the
+    rest again (GapModel.at_reference_shift): residuals and Jacobian equal those of the model built
+    from scratch at that shift, with instantaneous samples and with differenced fixes' windows, the
+    delay's own slope rows included; the rows do move, and the run keeps its smoothed samples."""
+    from adcpdyn.estimators.diagnosis.base import base_from
+    from adcpdyn.estimators.diagnosis.model import GapModel
+    from adcpdyn.estimators.measurement_model import EffectTerm
+
+    sc = short_scenario(20.0)
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, reference_from=reference_from)), seed=4)
+    config = DiagnosisConfig(navigation="random_walk")
+    base = base_from([case], config)
+    terms = [EffectTerm(get_effect("reference_latency"))]
+    model = GapModel(base, terms, solver=config.solver)
+    moved = model.at_reference_shift(0.7)
+    built = GapModel(base.at_delays(reference_shift_s=0.7), terms, solver=config.solver)
+    assert moved.base.runs[0].reference_shift_s == 0.7 and model.base.runs[0].reference_shift_s == 0.0
+    assert moved.base.runs[0].samples is base.runs[0].samples  # what the data alone give is not derived again
+    rng = np.random.default_rng(1)  # a velocity that changes from ping to ping: a shift moves the rows
+    x = model.start({n: 0.1 * rng.normal() for n in model.names}, {"reference_latency.delay_s": 0.9})
+    sigma = {k: 0.05 for k in model.sigma_keys}
+    w = model.weights(sigma)
+    got, want, before = (m.residual_fun(x / m.scale, w) for m in (moved, built, model))
+    for a, b in zip(got[:2], want[:2]):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(ca.densify(got[2])), np.asarray(ca.densify(want[2])), rtol=1e-10, atol=1e-10)
+    ref = np.isin(model.row_sigma, [i for i, k in enumerate(model.sigma_keys) if k[1] == "reference"])
+    assert np.max(np.abs(np.asarray(got[1]) - np.asarray(before[1]))[ref]) > 1e-3  # the reference rows moved
+    np.testing.assert_array_equal(np.asarray(got[1])[~ref], np.asarray(before[1])[~ref])  # nothing else did
+    with pytest.raises(ValueError, match="at_delays: expected some of"):
+        base.runs[0].at_delays(reference_delay_s=1.0)

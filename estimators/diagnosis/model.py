@@ -17,6 +17,8 @@ re-estimated without rebuilding.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import threading
 from dataclasses import dataclass, field
 
@@ -72,6 +74,10 @@ class DiagnosisBase:
     @property
     def sampled(self) -> bool:
         return any(r.attitude_source == "samples" for r in self.runs)
+
+    def at_delays(self, **delays: float) -> "DiagnosisBase":
+        """Every run at other current estimates of its delays (:meth:`.run_setup.RunSetup.at_delays`)."""
+        return dataclasses.replace(self, runs=[r.at_delays(**delays) for r in self.runs])
 
 
 def free_jacobian(fit) -> tuple:
@@ -178,22 +184,59 @@ class GapModel:
             raise ValueError("diagnosis: the base carries no prior (its heading deviation is pinned or absent)")
 
         x = model.x
-        z = ca.MX.sym("z", x.shape[0])
-        raw_z = ca.substitute([model.raw], [x], [self.scale * z])[0]
-        w = ca.MX.sym("w", raw_z.shape[0])
-        e_z = w * raw_z
+        self._z = z = ca.MX.sym("z", x.shape[0])
+        self._w = ca.MX.sym("w", model.raw.shape[0])
+        self._groups = {}  # (first, end) part -> residuals and Jacobian of parts a model at another reference shift shares
         self.solver_options = solver or SolverOptions(tol=1e-8, max_iter=300, hessian="gauss-newton", expand=False)
-        J_z = ca.jacobian(e_z, z)
-        self.residual_fun = ca.Function("residuals", [z, w], [e_z, raw_z, J_z])
-        self.jacobian_fun = ca.Function("residual_jacobian", [z, w], [J_z])
-        g_z = ca.substitute([model.g], [x], [self.scale * z])[0]
         self.lbg, self.ubg = model.lbg, model.ubg
-        self.nlp = {"x": z, "p": w, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
-        self.solver = build_solver(self.nlp, self.solver_options, "diagnosis", residuals=self.jacobian_fun,
-                                   residual_fun=ca.Function("weighted_residuals", [z, w], [e_z]))
+        self._assemble()
         # the fitted navigation per run (corrected velocities, where-regressors)
         self._nav = [None if V is None else ca.Function("nav", [z], [ca.substitute([V], [x], [self.scale * z])[0]])
                      for V in model.knot_syms]
+
+    def _assemble(self):
+        """The NLP over z, its residual Functions and solver. The residuals are differentiated in groups
+        of channels: the reference rows of each run, and the stretches between them, whose
+        expressions and Jacobians are kept for this model at another reference shift."""
+        model, z, w = self.model, self._z, self._w
+        sizes = [int(p.shape[0]) for p in model.raw_parts]
+        offsets = np.concatenate([[0], np.cumsum(sizes)])
+        reference = {model.reference_part(k) + j for k, r in enumerate(model.runs) if r.moving_reference for j in range(3)}
+        groups, first = [], 0
+        for i in range(len(sizes) + 1):  # boundaries: every change between reference and other parts
+            if i == len(sizes) or (i > first and (i in reference) != (first in reference)):
+                groups.append((first, i, first in reference))
+                first = i
+        raw, jac = [], []
+        for a, b, shifts in groups:
+            if shifts or (a, b) not in self._groups:
+                parts = ca.substitute(model.raw_parts[a:b], [model.x], [self.scale * z])
+                r = ca.vertcat(*parts)
+                entry = (r, ca.jacobian(w[int(offsets[a]):int(offsets[b])] * r, z))
+                if not shifts:
+                    self._groups[(a, b)] = entry
+            else:
+                entry = self._groups[(a, b)]
+            raw.append(entry[0])
+            jac.append(entry[1])
+        raw_z, J_z = ca.vertcat(*raw), ca.vertcat(*jac)
+        e_z = w * raw_z
+        self.residual_fun = ca.Function("residuals", [z, w], [e_z, raw_z, J_z])
+        self.jacobian_fun = ca.Function("residual_jacobian", [z, w], [J_z])
+        g_z = ca.substitute([model.g], [model.x], [self.scale * z])[0]
+        self.nlp = {"x": z, "p": w, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
+        self.solver = build_solver(self.nlp, self.solver_options, "diagnosis", residuals=self.jacobian_fun,
+                                   residual_fun=ca.Function("weighted_residuals", [z, w], [e_z]))
+
+    def at_reference_shift(self, shift_s: float) -> "GapModel":
+        """This model with every run's reference rows taken at t - ``shift_s`` (a reference delay's
+        current estimate): those rows and the solver built again, the rest of the NLP shared."""
+        with _BUILD_LOCK:
+            other = copy.copy(self)
+            other.base = self.base.at_delays(reference_shift_s=shift_s)
+            other.model = self.model.at_reference_shift(other.base.runs)
+            other._assemble()
+        return other
 
     # ------------------------------------------------------------------ names and numbers
     @property

@@ -11,7 +11,6 @@ profiles whose curvature gives their standard errors (:func:`delay_profile`,
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -38,8 +37,10 @@ def fixed_points(base, terms, peaks, config, model, fit, pinned):
         return model, fit
     for _ in range(LATENCY_ITERATIONS if names else 0):
         values = {field: float(fit.x[model.names.index(n)]) for field, n in names.items()}
-        shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **values) for r in base.runs])
-        model = GapModel(shifted, terms, peaks, solver=config.solver)
+        if set(values) == {"reference_shift_s"}:  # the reference rows alone move: the rest of the NLP is kept
+            model = model.at_reference_shift(values["reference_shift_s"])
+        else:
+            model = GapModel(base.at_delays(**values), terms, peaks, solver=config.solver)
         new = model.solve(model.start(fit.values), fit.sigma, fixed=pinned)
         moved = max(abs(float(new.x[model.names.index(n)]) - values[field]) for field, n in names.items())
         fit = new
@@ -57,8 +58,7 @@ def held_at_delay(model: GapModel, key: str, d: float) -> dict:
 def fit_at_delay(base, terms, peaks, config, field: str, key: str, d: float, x: dict, sigma: dict):
     """(model, fit) exact at delay ``d``: every run's ``field`` (``reference_shift_s``, ``sample_shift_s``)
     set to it, the unknown ending in ``key`` pinned there, the fit started from ``x``."""
-    shifted = dataclasses.replace(base, runs=[dataclasses.replace(r, **{field: float(d)}) for r in base.runs])
-    model = GapModel(shifted, terms, peaks, solver=config.solver)
+    model = GapModel(base.at_delays(**{field: d}), terms, peaks, solver=config.solver)
     return model, model.solve(model.start(x), sigma, fixed=held_at_delay(model, key, d))
 
 
@@ -79,8 +79,16 @@ def delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile
     between its knots): the estimate is then drawn to the delays that keep them there. Without
     ``profile``: held where ``values`` (the chosen model's) put it."""
 
+    first, build_lock = [], threading.Lock()  # the model at the first delay: every other delay rebuilds its reference rows only
+
     def at(d: float, x: dict):
-        return fit_at_delay(base, terms, peaks, config, "reference_shift_s", REFERENCE_DELAY, d, x, sigma)
+        with build_lock:
+            if not first:
+                first.append(GapModel(base.at_delays(reference_shift_s=d), terms, peaks, solver=config.solver))
+                model = first[0]
+            else:
+                model = first[0].at_reference_shift(d)
+        return model, model.solve(model.start(x), sigma, fixed=held_at_delay(model, REFERENCE_DELAY, d))
 
     def settled(model: GapModel, fit: Fit, d: float):  # the attitude's delays, if any, to their fixed point
         return fixed_points(model.base, terms, peaks, config, model, fit, held_at_delay(model, REFERENCE_DELAY, d))
