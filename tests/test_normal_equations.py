@@ -115,6 +115,28 @@ def test_banded_selected_inversion_equals_the_dense_inverse():
     assert arrow_leverages(A, J, np.ones(J.shape[1], dtype=bool)) is None  # the globals make the band wide
 
 
+def test_differenced_fixes_windows_keep_the_banded_inversion():
+    """A reference velocity differenced from two fixes is the mean over its window: its row touches every
+    ping inside (winriver01: a band of 27 in the velocities' block). The selected inversion takes that
+    band, and its leverages still equal the dense diag(J A^-1 J^T)."""
+    from adcpdyn.estimators.statistics.normal_equations import arrow_leverages, ridged
+
+    rng = np.random.default_rng(8)
+    knots, g = 120, 5
+    rows = [list(range(3 * j, 3 * j + 6)) for j in range(knots - 1) for _ in range(4)]  # pings' beams: two knots
+    rows += [list(range(3 * j, min(3 * j + 27, 3 * knots), 3)) for j in range(0, knots - 9, 3)]  # windows of 9 pings
+    rows = [r + list(3 * knots + rng.choice(g, 2, replace=False)) for r in rows]
+    I = np.concatenate([[i] * len(r) for i, r in enumerate(rows)])
+    J = sp.csr_matrix((rng.normal(size=I.size), (I, np.concatenate(rows))), shape=(len(rows), 3 * knots + g))
+    A = ridged((J.T @ J).tocsc())
+    local = np.arange(J.shape[1]) < 3 * knots
+    Jd = J.toarray()
+    dense = np.einsum("ij,jk,ik->i", Jd, np.linalg.inv(A.toarray()), Jd)
+    h = arrow_leverages(A, J, local)
+    assert h is not None  # the band (24 here) is taken, not the solves
+    np.testing.assert_allclose(h, dense, rtol=1e-8, atol=1e-12)
+
+
 def test_redundancies_share_the_degrees_of_freedom():
     """sum_g r_g = n - p (the trace of I - H), each r_g = n_g - sum of its leverages."""
     J, _ = _problem(1)

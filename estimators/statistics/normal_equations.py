@@ -18,7 +18,8 @@ from scipy.sparse.linalg import splu
 
 CHUNK = 2048  # right-hand sides solved at once (memory: CHUNK x unknowns doubles)
 RIDGE = 1e-10  # relative damping of J^T J's diagonal: an unknown no row determines stays put, never NaN
-MAX_BAND = 8  # widest band of the local block (velocities per ping) the selected inversion takes
+MAX_BAND = 64  # widest band of the velocities' block the selected inversion takes (n p^2 work, against the solves' n^2):
+# a reference differenced from two fixes spans every ping of its window (winriver01: 27; 8 sent it to the solves)
 
 
 def as_sparse(J) -> sp.csr_matrix:
