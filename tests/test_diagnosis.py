@@ -637,3 +637,21 @@ def test_a_model_at_another_reference_shift_is_the_model_built_there(reference_f
     np.testing.assert_array_equal(np.asarray(got[1])[~ref], np.asarray(before[1])[~ref])  # nothing else did
     with pytest.raises(ValueError, match="at_delays: expected some of"):
         base.runs[0].at_delays(reference_delay_s=1.0)
+
+
+def test_an_effect_that_changes_no_prediction_has_a_held_out_z_of_zero():
+    """The paired held-out z of predictions equal to the reference's up to rounding is 0 (an effect
+    estimated at zero), not a z drawn from the rounding; a real change keeps its z."""
+    from adcpdyn.estimators.diagnosis.heldout import heldout_improvement_z
+
+    case = simulate(short_scenario(30.0), seed=3)
+    config = DiagnosisConfig(effects=("compass_offset",), navigation="random_walk")
+    r = diagnose(case, config)
+    (bm, bf), (m, f) = r.fits["base"], r.fits["compass_offset"]
+    block = config.block_s(True)
+    cv_base, cv = cv_residuals(bm, bf, config.cv_folds, block), cv_residuals(m, f, config.cv_folds, block)
+    rounded = cv_base * (1.0 + 1e-13 * np.random.default_rng(0).standard_normal(cv_base.shape))
+    assert heldout_improvement_z(bm, rounded, bm, cv_base, bf.sigma) == 0.0
+    moved = cv_base + 0.01 * np.random.default_rng(1).standard_normal(cv_base.shape) * (bm.mask > 0)
+    z = heldout_improvement_z(bm, moved, bm, cv_base, bf.sigma)
+    assert np.isfinite(z) and z != 0.0

@@ -147,6 +147,9 @@ def _paired_bins(model: GapModel, raw: np.ndarray, ref_model: GapModel, ref_raw:
     return out
 
 
+SAME_PREDICTION_RTOL = 1e-9  # held-out predictions this close to the reference's are the reference's
+
+
 def heldout_improvement_z(model: GapModel, cv: np.ndarray, ref_model: GapModel, ref_cv: np.ndarray, noise: dict) -> float:
     """How significantly the model predicts the held-out data better than the reference model: the
     change of the held-out gap (:func:`heldout_gap`'s group-averaged excess) over its standard error, from
@@ -155,6 +158,8 @@ def heldout_improvement_z(model: GapModel, cv: np.ndarray, ref_model: GapModel, 
     much of a gap that may hold other structure it removes (the shrink share)."""
     if not getattr(model, "random_walk", False):
         return float("nan")
+    if cv.shape == ref_cv.shape and np.allclose(cv, ref_cv, rtol=SAME_PREDICTION_RTOL, atol=0.0):
+        return 0.0  # the same predictions (an effect estimated at zero): no change, not the z of their rounding
     bins = _paired_bins(model, cv, ref_model, ref_cv, noise, weights=True)
     if bins is None:
         return float("nan")
