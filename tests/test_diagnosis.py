@@ -604,8 +604,8 @@ def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement(
         DiagnosisConfig(heldout_z_walk=float("nan"))
 
 
-@pytest.mark.parametrize("reference_from", ["velocity", "positions"])
-def test_a_model_at_another_reference_shift_is_the_model_built_there(reference_from):
+@pytest.mark.parametrize("reference_from,runs", [("velocity", 1), ("positions", 1), ("velocity", 2)])
+def test_a_model_at_another_reference_shift_is_the_model_built_there(reference_from, runs):
     """The reference delay's profile moves a model's reference rows to each delay without building the
     rest again (GapModel.at_reference_shift): residuals and Jacobian equal those of the model built
     from scratch at that shift, with instantaneous samples and with differenced fixes' windows, the
@@ -615,14 +615,15 @@ def test_a_model_at_another_reference_shift_is_the_model_built_there(reference_f
     from adcpdyn.estimators.measurement_model import EffectTerm
 
     sc = short_scenario(20.0)
-    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, reference_from=reference_from)), seed=4)
+    cases = [simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, reference_from=reference_from)), seed=4 + k)
+             for k in range(runs)]  # several runs: each run's reference rows move, in their place
     config = DiagnosisConfig(navigation="random_walk")
-    base = base_from([case], config)
+    base = base_from(cases, config)
     terms = [EffectTerm(get_effect("reference_latency"))]
     model = GapModel(base, terms, solver=config.solver)
     moved = model.at_reference_shift(0.7)
     built = GapModel(base.at_delays(reference_shift_s=0.7), terms, solver=config.solver)
-    assert moved.base.runs[0].reference_shift_s == 0.7 and model.base.runs[0].reference_shift_s == 0.0
+    assert all(r.reference_shift_s == 0.7 for r in moved.base.runs) and model.base.runs[0].reference_shift_s == 0.0
     assert moved.base.runs[0].samples is base.runs[0].samples  # what the data alone give is not derived again
     rng = np.random.default_rng(1)  # a velocity that changes from ping to ping: a shift moves the rows
     x = model.start({n: 0.1 * rng.normal() for n in model.names}, {"reference_latency.delay_s": 0.9})
@@ -633,7 +634,10 @@ def test_a_model_at_another_reference_shift_is_the_model_built_there(reference_f
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(np.asarray(ca.densify(got[2])), np.asarray(ca.densify(want[2])), rtol=1e-10, atol=1e-10)
     ref = np.isin(model.row_sigma, [i for i, k in enumerate(model.sigma_keys) if k[1] == "reference"])
-    assert np.max(np.abs(np.asarray(got[1]) - np.asarray(before[1]))[ref]) > 1e-3  # the reference rows moved
+    change = np.abs(np.asarray(got[1]) - np.asarray(before[1])).ravel()
+    for k in range(runs):  # every run's reference rows moved
+        mine = model.row_sigma == model.sigma_keys.index((k, "reference"))
+        assert np.max(change[mine]) > 1e-3
     np.testing.assert_array_equal(np.asarray(got[1])[~ref], np.asarray(before[1])[~ref])  # nothing else did
     with pytest.raises(ValueError, match="at_delays: expected some of"):
         base.runs[0].at_delays(reference_delay_s=1.0)
