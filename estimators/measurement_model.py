@@ -148,13 +148,12 @@ class SurveyModel:
     """
 
     def __init__(self, runs: list[RunSetup], spec: ModelSpec, effects=(), peaks: dict | None = None,
-                 compile_min_pings: int | None = None, compile_jacobians: bool = False):
+                 compile_min_pings: int | None = None):
         if not runs:
             raise ValueError("runs: expected at least one run")
         self.runs, self.spec = runs, spec
         # the per-ping models as machine code when the problem's pings (all runs') reach compile_min_pings
         self.compiled = compile_min_pings is not None and sum(r.case.pings.n for r in runs) >= compile_min_pings
-        self.compile_jacobians = compile_jacobians  # and their Jacobians, where the residual Jacobian is formed symbolically
         first = runs[0].case
         self.frame = first.attitude.frame
         self.head_sensor = self.frame == "transducer"
@@ -342,7 +341,7 @@ class SurveyModel:
 
     def _fast(self, f: ca.Function) -> ca.Function:
         """A per-ping model as machine code where the model is compiled (the gradient's sweep too)."""
-        return compiled(f, reverse=True, jacobian=self.compile_jacobians) if self.compiled else f
+        return compiled(f, reverse=True) if self.compiled else f
 
     def _reference_rows(self, k: int) -> list:
         """Run k's reference rows (north, east, down: model - measurement), taken at t - its shift, the

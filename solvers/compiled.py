@@ -1,7 +1,7 @@
 """CasADi Functions compiled to machine code once per machine, kept in a cache folder you can see.
 
 CasADi generates the C code of a Function (with its first-order reverse derivative when a
-solver's gradient goes through it, and its Jacobian when a residual Jacobian is formed through it); the code's hash, with the compiler command and CasADi's
+solver's gradient goes through it); the code's hash, with the compiler command and CasADi's
 version (and the CPU, for code built for its instruction set: ``NATIVE_FLAGS``, IEEE arithmetic
 kept), names a shared library in the cache folder. The system C compiler builds it there the
 first time (written under a temporary name, then renamed: parallel workers never see half a
@@ -36,7 +36,7 @@ SUFFIX = ".so"
 
 last_failure: str | None = None  # why the last compilation fell back to the interpreted Function
 MAX_LOADED = 64  # loaded libraries kept for reuse (by the Function's serialized form)
-_loaded: dict = {}  # (serialized hash, reverse, jacobian, cache folder, compiler) -> (library path, the loaded Function)
+_loaded: dict = {}  # (serialized hash, reverse, cache folder, compiler) -> (library path, the loaded Function)
 _loaded_lock = threading.Lock()
 
 
@@ -90,14 +90,12 @@ def _cpu() -> str:
     return "\n".join(line for line in first.splitlines() if line.split(":")[0].strip() in ("vendor_id", "model name", "flags"))
 
 
-def library_path(fun: ca.Function, reverse: bool = False, jacobian: bool = False) -> tuple[Path, str]:
+def library_path(fun: ca.Function, reverse: bool = False) -> tuple[Path, str]:
     """Where ``fun``'s library lives in the cache, and its C code."""
     gen = ca.CodeGenerator(f"{fun.name()}.c", {"with_header": False})
     gen.add(fun)
     if reverse:
         gen.add(fun.reverse(1))  # named adj1_<name>: casadi.external finds it for the gradient
-    if jacobian:
-        gen.add(fun.jacobian())  # named jac_<name>: a residual Jacobian's forward sweeps take it, not reverse ones
     code = gen.dump()
     build = flags()
     cpu = _cpu() if build == NATIVE_FLAGS else ""
@@ -105,15 +103,9 @@ def library_path(fun: ca.Function, reverse: bool = False, jacobian: bool = False
     return cache_dir() / f"{fun.name()}_{key.hexdigest()[:20]}{SUFFIX}", code
 
 
-def compiled(fun: ca.Function, reverse: bool = False, jacobian: bool = False) -> ca.Function:
+def compiled(fun: ca.Function, reverse: bool = False) -> ca.Function:
     """``fun`` as a compiled library from the cache (built there if missing), with its reverse
-    derivative when ``reverse`` and its Jacobian when ``jacobian``; ``fun`` itself when it cannot be
-    compiled (:data:`last_failure`).
-
-    With its Jacobian compiled, the symbolic Jacobian of a problem mapped over the pings takes each
-    ping's Jacobian from the library (a diagnosis model's residual Jacobian on a 2995-ping transect
-    0.17 -> 0.10 s, a three-iteration solve 0.82 -> 0.55 s); otherwise CasADi derives it by reverse
-    sweeps, one per output, of the compiled reverse derivative.
+    derivative when ``reverse``; ``fun`` itself when it cannot be compiled (:data:`last_failure`).
 
     A Function built again with the same expressions (its serialized form: a diagnosis builds
     the same per-ping model for each of its dozens of candidate models) gets the library loaded
@@ -125,12 +117,12 @@ def compiled(fun: ca.Function, reverse: bool = False, jacobian: bool = False) ->
         global last_failure
         last_failure = "no C compiler (gcc, cc or $CC) on PATH"
         return fun
-    key = (hashlib.sha256(fun.serialize().encode()).hexdigest(), reverse, jacobian, str(cache_dir()), cc)
+    key = (hashlib.sha256(fun.serialize().encode()).hexdigest(), reverse, str(cache_dir()), cc)
     with _loaded_lock:
         hit = _loaded.get(key)
         if hit is not None and hit[0].exists():
             return hit[1]
-        out, path = _load(fun, reverse, cc, jacobian)
+        out, path = _load(fun, reverse, cc)
         if path is not None:
             if len(_loaded) >= MAX_LOADED:
                 _loaded.clear()
@@ -138,11 +130,11 @@ def compiled(fun: ca.Function, reverse: bool = False, jacobian: bool = False) ->
         return out
 
 
-def _load(fun: ca.Function, reverse: bool, cc: str, jacobian: bool = False) -> tuple[ca.Function, Path | None]:
+def _load(fun: ca.Function, reverse: bool, cc: str) -> tuple[ca.Function, Path | None]:
     """(the loaded library's Function, its path), building it into the cache if missing; (``fun``, None)
     when it cannot be built."""
     global last_failure
-    path, code = library_path(fun, reverse, jacobian)
+    path, code = library_path(fun, reverse)
     if not path.exists():
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

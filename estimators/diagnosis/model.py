@@ -163,8 +163,7 @@ class GapModel:
     def _build(self, base: DiagnosisBase, effects, peaks, solver):
         self.base = base
         self.effects = [t if isinstance(t, EffectTerm) else EffectTerm(t) for t in effects]
-        self.model = model = SurveyModel(base.runs, base.spec, self.effects, peaks, compile_min_pings=GAP_COMPILE_MIN_PINGS,
-                                         compile_jacobians=True)
+        self.model = model = SurveyModel(base.runs, base.spec, self.effects, peaks, compile_min_pings=GAP_COMPILE_MIN_PINGS)
         u = model.unknowns
         self.names, self.scale = list(u.names), u.scale
         self.lbx, self.ubx = u.lower, u.upper
