@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import itertools
 import threading
 from dataclasses import dataclass, field
 
@@ -202,13 +203,10 @@ class GapModel:
         sizes = [int(p.shape[0]) for p in model.raw_parts]
         offsets = np.concatenate([[0], np.cumsum(sizes)])
         reference = {model.reference_part(k) + j for k, r in enumerate(model.runs) if r.moving_reference for j in range(3)}
-        groups, first = [], 0
-        for i in range(len(sizes) + 1):  # boundaries: every change between reference and other parts
-            if i == len(sizes) or (i > first and (i in reference) != (first in reference)):
-                groups.append((first, i, first in reference))
-                first = i
         raw, jac = [], []
-        for a, b, shifts in groups:
+        for shifts, group in itertools.groupby(range(len(sizes)), key=reference.__contains__):
+            group = list(group)  # a run's reference channels, or a stretch between them
+            a, b = group[0], group[-1] + 1
             if shifts or (a, b) not in self._groups:
                 parts = ca.substitute(model.raw_parts[a:b], [model.x], [self.scale * z])
                 r = ca.vertcat(*parts)

@@ -79,23 +79,19 @@ def delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile
     between its knots): the estimate is then drawn to the delays that keep them there. Without
     ``profile``: held where ``values`` (the chosen model's) put it."""
 
-    first, build_lock = [], threading.Lock()  # the model at the first delay: every other delay rebuilds its reference rows only
+    d0 = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY)) if not profile else 0.0
+    built = GapModel(base.at_delays(reference_shift_s=d0), terms, peaks, solver=config.solver)  # every other delay
+    # rebuilds its reference rows only, with its own solver (the profile's two sides solve at once)
 
     def at(d: float, x: dict):
-        with build_lock:
-            if not first:
-                first.append(GapModel(base.at_delays(reference_shift_s=d), terms, peaks, solver=config.solver))
-                model = first[0]
-            else:
-                model = first[0].at_reference_shift(d)
+        model = built if d == d0 else built.at_reference_shift(d)
         return model, model.solve(model.start(x), sigma, fixed=held_at_delay(model, REFERENCE_DELAY, d))
 
     def settled(model: GapModel, fit: Fit, d: float):  # the attitude's delays, if any, to their fixed point
         return fixed_points(model.base, terms, peaks, config, model, fit, held_at_delay(model, REFERENCE_DELAY, d))
 
     if not profile:
-        d = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY))
-        return settled(*at(d, values), d)
+        return settled(*at(d0, values), d0)
     step = min(float(np.median(np.diff(r.knots))) for r in base.runs if r.knots is not None)
     tried, marginal, kept = {}, {}, {}  # each delay's fit and marginal; the model of the best delay only
     lock = threading.Lock()
