@@ -31,10 +31,22 @@ def reference_noise_from_differences(time_s, velocity_m_s) -> float:
     return float(max(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2), 1e-3))
 
 
+def range_noise_from_differences(slant_range_m) -> float:
+    """Slant-range noise from each beam's ping-to-ping first differences (robust MAD over sqrt 2,
+    the median over the beams): the bed's own relief between pings counts as noise, so an upper
+    bound on a rough bed; 2 cm without enough ranges."""
+    d = np.diff(np.asarray(slant_range_m, dtype=float), axis=0)
+    per_beam = [1.4826 * np.median(np.abs(c - np.median(c))) / np.sqrt(2)
+                for c in (col[np.isfinite(col)] for col in d.T) if c.size >= 10]
+    return float(max(np.median(per_beam), 1e-3)) if per_beam else 0.02
+
+
 def initial_noise(case: Case, fit: AttitudeFit | None, with_attitude: bool) -> dict:
     """Independent noise levels to start from: attitude pre-fit residuals, the bottom track's
-    error velocity, the reference's first differences, 2 cm for ranges."""
-    s = {"bt": bt_noise_from_error_velocity(case), "range": 0.02}
+    error velocity, the reference's and the slant ranges' first differences."""
+    ranges = case.pings.bt_range_m
+    s = {"bt": bt_noise_from_error_velocity(case),
+         "range": 0.02 if ranges is None else range_noise_from_differences(ranges)}
     if with_attitude and fit is not None:
         s.update(heading=max(fit.sigmas[0], 1e-4), pitch=max(fit.sigmas[1], 1e-4), roll=max(fit.sigmas[2], 1e-4))
     ref = case.reference
