@@ -7,6 +7,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+from scipy.stats import median_abs_deviation
 
 from ..cases.case import Case
 from .noise_guess import bt_noise_from_error_velocity
@@ -125,7 +126,7 @@ def random_walk_intensity(case: Case, velocity_m_s: np.ndarray) -> float:
         return 0.05
     dv, dt = np.diff(v[ok], axis=0), np.diff(t[ok])
     z = (dv / np.sqrt(dt)[:, None]).ravel()
-    spread2 = (1.4826 * np.median(np.abs(z - np.median(z)))) ** 2
+    spread2 = median_abs_deviation(z, scale="normal") ** 2
     var_v = float(np.mean(janus_velocity_variance(case)[:2]))
     q = spread2 - 2 * var_v / float(np.median(dt))
     return float(np.sqrt(max(q, 0.01 * spread2, 1e-8)))

@@ -4,6 +4,7 @@ the reference's first differences, the attitude pre-fit's residuals (the fit re-
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import median_abs_deviation
 
 from ..cases.case import Case
 from ..models.janus import error_velocity
@@ -16,8 +17,7 @@ def bt_noise_from_error_velocity(case: Case) -> float:
     err = err[np.isfinite(err)]
     if err.size < 5:
         return 0.01
-    mad = 1.4826 * np.median(np.abs(err - np.median(err)))
-    return float(max(mad / norm, 1e-4))
+    return float(max(median_abs_deviation(err, scale="normal") / norm, 1e-4))
 
 
 def reference_noise_from_differences(time_s, velocity_m_s) -> float:
@@ -28,7 +28,7 @@ def reference_noise_from_differences(time_s, velocity_m_s) -> float:
     d = d[np.all(np.isfinite(d), axis=1)].ravel()
     if d.size < 10:
         return 0.02
-    return float(max(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2), 1e-3))
+    return float(max(median_abs_deviation(d, scale="normal") / np.sqrt(2), 1e-3))
 
 
 def range_noise_from_differences(slant_range_m) -> float:
@@ -36,7 +36,7 @@ def range_noise_from_differences(slant_range_m) -> float:
     the median over the beams): the bed's own relief between pings counts as noise, so an upper
     bound on a rough bed; 2 cm without enough ranges."""
     d = np.diff(np.asarray(slant_range_m, dtype=float), axis=0)
-    per_beam = [1.4826 * np.median(np.abs(c - np.median(c))) / np.sqrt(2)
+    per_beam = [median_abs_deviation(c, scale="normal") / np.sqrt(2)
                 for c in (col[np.isfinite(col)] for col in d.T) if c.size >= 10]
     return float(max(np.median(per_beam), 1e-3)) if per_beam else 0.02
 

@@ -66,7 +66,7 @@ COMPILE_MIN_PINGS = 500
 # (their fixed point: one step left winriver01's reference level 35 % above it and its yaw SE 1.47 deg, 1.13 at
 # it), at most VCE_MAX_ITERATIONS times; the result's message says how many and whether they settled. A random
 # walk's (Helmert) levels crawl there, the beams' and the reference's trading the velocity between them
-# (winriver02: still 3-9 % a round after 10), so it keeps VCE_WALK_ITERATIONS and says it has not settled
+# (winriver02: 9 % a round after three, 2.9 % after ten), so it keeps VCE_WALK_ITERATIONS and says it has not settled
 VCE_RTOL = 0.01
 VCE_MAX_ITERATIONS = 10
 VCE_WALK_ITERATIONS = 3
@@ -76,6 +76,11 @@ VCE_WALK_ITERATIONS = 3
 REFIT_MU_INIT = 1e-3
 MIN_HEADING_SPAN = 0.1  # heading_span above which the one-cycle compass deviation is estimated (0.5: all round)
 CONFOUNDED_R2 = 0.9  # share of a yaw's variance explained by the bed's: the two are not told apart
+
+
+def largest_move(new: dict, old: dict) -> float:
+    """The largest relative change of a noise level from ``old`` to ``new`` (same keys)."""
+    return max(abs(v / old[k] - 1.0) for k, v in new.items())
 
 
 def dominant_period_s(fit: AttitudeFit) -> float:
@@ -334,20 +339,21 @@ class CalibrationProblem:
         else:
             ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
                             make_solver=make, warm_start=cfg.solver.warm_start, build_s=self.build_s)
+        unsettled = None
         if cfg.estimate_noise:
             refit, rounds, moved = self._noise_fixed_point(ms, lbz, ubz)
             settled = (f"noise re-estimated {rounds} times, settled to {100 * VCE_RTOL:g} %" if moved <= VCE_RTOL else
                        f"noise re-estimated {rounds} times, NOT settled: its levels still moved {100 * moved:.1f} %")
-            unsettled = None if moved <= VCE_RTOL else f"noise levels: {settled} (the standard errors scale with them)"
+            if moved > VCE_RTOL:
+                unsettled = f"noise levels: {settled} (the standard errors scale with them)"
             # the per-start table stays that of the multistart; the final solve is the refit
             ms = MultistartResult(**{**ms.__dict__, "x": refit.x, "objective": refit.objective, "success": refit.success,
                                      "status": refit.status, "iterations": refit.iterations, "lam_g": refit.lam_g,
                                      "g": refit.g, "message": ms.message + f"; {settled}, refit: {refit.status}"})
-            result = self._result(ms)
-            if unsettled:
-                result.warnings.append(unsettled)
-            return result
-        return self._result(ms)
+        result = self._result(ms)
+        if unsettled:
+            result.warnings.append(unsettled)
+        return result
 
     def _noise_fixed_point(self, ms: MultistartResult, lbz, ubz) -> tuple:
         """(refit, re-estimations, largest relative move of a noise level at the last one): the noise levels
@@ -359,17 +365,12 @@ class CalibrationProblem:
         most = VCE_WALK_ITERATIONS if self.walk else VCE_MAX_ITERATIONS
         for rounds in range(1, most + 1):
             new = self._noise_levels(refit.x)
-            moved = self._moved(refit, new)
+            moved = largest_move(new, self.sigma)
             if moved <= VCE_RTOL and rounds > 1:  # settled: the last refit's levels are the fixed point's
                 return refit, rounds - 1, moved
             self.sigma = new
             refit = multistart(solver, refit.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)
-        return refit, most, self._moved(refit)
-
-    def _moved(self, fit, new: dict | None = None) -> float:
-        """The largest relative move of a noise level re-estimated at ``fit`` (``new``: already re-estimated)."""
-        new = self._noise_levels(fit.x) if new is None else new
-        return max(abs(v / self.sigma[k] - 1.0) for k, v in new.items())
+        return refit, most, largest_move(self._noise_levels(refit.x), self.sigma)
 
     def _refit_solver(self):
         """The solver of the refit from the solution: IPOPT's barrier starting at ``REFIT_MU_INIT``
