@@ -175,6 +175,7 @@ def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
     note = calibration_base_note(record("knots"), base, ["compass_offset"], [score])
     assert "calibrated on knots navigation while this base takes random_walk" in note
     assert "compass_offset.A -5.78 +- 1.1 deg" in note and "+- 2.9 deg" in note and "--navigation random_walk" in note
+    assert note.endswith("what is still named then is in these runs' data, not the bases' difference")
     assert calibration_base_note(record("random_walk"), base, ["compass_offset"], [score]) == ""
     assert calibration_base_note(record(None), base, ["compass_offset"], [score]) == ""
     assert calibration_base_note(record("knots"), base, ["heave"], [score]) == ""
@@ -544,6 +545,9 @@ def test_a_real_transect_without_gnss_gets_a_base_that_follows_the_boat():
     assert smooth.verdict == "none" and smooth.gap_z_before > 50
     walk = diagnose(case, DiagnosisConfig())
     assert walk.base["navigation"] == "random_walk" and walk.verdict == "none" and walk.gap_z_before < 3
+    moved = walk.base["noise_levels_moved"]  # whether its noise levels settled is said, either way
+    assert moved >= 0 and any(n.startswith("noise levels re-estimated 3 times, ") for n in walk.base["notes"])
+    assert smooth.base["noise_levels_moved"] is None
     held = [s for s in walk.ranking if s["at_bound"]]
     assert all(not s["significant"] for s in held)
 
@@ -564,6 +568,23 @@ def test_reference_delay_profile_holds_the_delay_and_reports_its_curvature():
     assert not fit.free[i] and fit.x[i] == delay
     assert model.base.runs[0].reference_shift_s == pytest.approx(delay)  # the model is exact at it
     assert r.verdict == "none"
+
+
+def test_the_base_says_whether_its_noise_levels_settled(monkeypatch):
+    """A random walk's variance components crawl to their fixed point: the move reported is the last
+    re-estimation's (not the first's, from the starting levels), and the words say NOT settled above 1 %."""
+    from adcpdyn.estimators.diagnosis import base
+
+    levels = iter([{"bt": 0.5, "ref": 2.0}, {"bt": 0.25, "ref": 1.0}, {"bt": 0.225, "ref": 1.005}])
+    monkeypatch.setattr(base, "variance_components", lambda model, fit: next(levels))
+    solves = []
+    model = SimpleNamespace(solve=lambda x, sigma, fixed=None: solves.append(sigma) or SimpleNamespace(x=x, sigma=sigma))
+    fit, sigma, moved = base.noise_from_data(model, SimpleNamespace(x=np.zeros(2), sigma={"bt": 1.0, "ref": 1.0}))
+    assert base.VCE_ITERATIONS == 3 and len(solves) == 3 and sigma == fit.sigma == {"bt": 0.225, "ref": 1.005}
+    assert moved == pytest.approx(0.1)  # 0.25 -> 0.225, the largest of the last round's moves
+    assert base.settled_note(moved).endswith("NOT settled: they still moved 10.0 % at the last (the standard errors "
+                                             "scale with them)")
+    assert base.settled_note(0.005) == "noise levels re-estimated 3 times, settled to 1 %"
 
 
 def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement():

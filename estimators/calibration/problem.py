@@ -42,7 +42,7 @@ from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..knots import knot_times, ping_knots
 from ..measurement_model import ANGLE_NAMES, ModelSpec, SurveyModel, default_threads
 from ..run_setup import RunSetup, choose_navigation, course_offset_rad, heading_span
-from ..statistics.normal_equations import group_levels, redundancy
+from ..statistics.normal_equations import VCE_RTOL, group_levels, largest_move, redundancy
 from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
 from .config import CalibrationConfig
 from .moving_bed_decision import mean_flow_speed, moving_bed_test
@@ -67,7 +67,6 @@ COMPILE_MIN_PINGS = 500
 # it), at most VCE_MAX_ITERATIONS times; the result's message says how many and whether they settled. A random
 # walk's (Helmert) levels crawl there, the beams' and the reference's trading the velocity between them
 # (winriver02: 9 % a round after three, 2.9 % after ten), so it keeps VCE_WALK_ITERATIONS and says it has not settled
-VCE_RTOL = 0.01
 VCE_MAX_ITERATIONS = 10
 VCE_WALK_ITERATIONS = 3
 # IPOPT's initial barrier for the refit after the noise levels, which starts at the solution: at 0.1 (a
@@ -76,11 +75,6 @@ VCE_WALK_ITERATIONS = 3
 REFIT_MU_INIT = 1e-3
 MIN_HEADING_SPAN = 0.1  # heading_span above which the one-cycle compass deviation is estimated (0.5: all round)
 CONFOUNDED_R2 = 0.9  # share of a yaw's variance explained by the bed's: the two are not told apart
-
-
-def largest_move(new: dict, old: dict) -> float:
-    """The largest relative change of a noise level from ``old`` to ``new`` (same keys)."""
-    return max(abs(v / old[k] - 1.0) for k, v in new.items())
 
 
 def dominant_period_s(fit: AttitudeFit) -> float:

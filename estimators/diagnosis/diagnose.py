@@ -174,7 +174,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             gm, gf = current
             held = {n: float(gf.x[gm.names.index(n)]) for n in gm.names if n.endswith(REFERENCE_DELAY)}  # at its profile's best
             profile_se = gf.profile_se
-            gf, noise = noise_from_data(gm, gf, fixed={**pinned_effect_parameters(gm, base), **held})
+            gf, noise, _ = noise_from_data(gm, gf, fixed={**pinned_effect_parameters(gm, base), **held})
             gf.profile_se = profile_se
             current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
@@ -330,6 +330,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                                                             for r in base.runs)),
                  "attitude_source_reason": "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs)),
                  "calibration": base.pins.source or None, "pinned": base.pins.values, "notes": base.notes,
+                 "noise_levels_moved": base.noise_moved,
                  "navigation": ", ".join(dict.fromkeys(r.navigation for r in base.runs)),
                  "calibration_on_another_base": other_base or None,
                  "log_likelihood": float(base_fit.log_likelihood(base_model)), "n_observations": n_obs,

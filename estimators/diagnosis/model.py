@@ -64,13 +64,15 @@ class Pins:
 @dataclass
 class DiagnosisBase:
     """What every model of one diagnosis shares: the runs, the base's model spec, the pins
-    and the starting noise levels per (run, group)."""
+    and the starting noise levels per (run, group); ``noise_moved``: the largest relative move of a
+    noise level at the last of a random walk's re-estimations (None on knots)."""
 
     runs: list
     spec: ModelSpec
     pins: Pins
     sigma0: dict
     notes: list = field(default_factory=list)
+    noise_moved: float | None = None
 
     @property
     def sampled(self) -> bool:

@@ -85,4 +85,5 @@ def calibration_base_note(calibration, base, selected: list, ranking: list) -> s
         extra = f" (the calibration's heading misalignment: +- {np.degrees(calibration.heading_misalignment_se_rad):.2g} deg)"
     return (f"these are the calibration's own runs, calibrated on {calibrated} navigation while this base takes {here}: "
             f"{', '.join(found)}{extra} may be the two bases reading the same data apart rather than a change since the "
-            f"calibration; calibrate with --navigation {here} (this base) and diagnose again before reading it as one")
+            f"calibration; to tell, calibrate with --navigation {here} (this base) and diagnose again: what is still "
+            f"named then is in these runs' data, not the bases' difference")

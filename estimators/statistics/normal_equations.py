@@ -196,6 +196,14 @@ def redundancy(J, row_group: np.ndarray, used: np.ndarray, n_groups: int, local:
     return r
 
 
+VCE_RTOL = 0.01  # noise levels settled: none moved by more than this at the last re-estimation
+
+
+def largest_move(new: dict, old: dict) -> float:
+    """The largest relative change of a noise level from ``old`` to ``new`` (same keys)."""
+    return max(abs(v / old[k] - 1.0) for k, v in new.items())
+
+
 def group_levels(raw: np.ndarray, row_group: np.ndarray, used: np.ndarray, keys: list, r: np.ndarray,
                  levels: dict, stated: tuple = ("prior",)) -> dict:
     """``levels`` with each group's noise level re-estimated as its residuals over its redundancy
