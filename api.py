@@ -425,7 +425,26 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
     result.warnings = notes + list(result.warnings)  # the cases' own warnings first, in CALIB.json too
     result.provenance = {**result.provenance, "cases": [{**_case_record(s), "warnings": ns}
                                                         for s, (_, ns) in zip(sources, prepared)]}
+    wanted = config.own_effects == "on" or (config.own_effects == "auto" and not many)
+    if wanted and result.success and result.attitude_source == "samples":
+        say("diagnosing the runs on top of the calibration: what they show of their own")
+        result.own_effects = _own_effects(sources, result)
     return result
+
+
+def _own_effects(sources: list, result) -> dict | None:
+    """What the calibrated runs show on top of their calibration (CALIB.json ``own_effects``), diagnosed
+    as ``adcpdyn diagnose`` would them; None, with a warning, where they cannot be diagnosed."""
+    from .estimators.calibration.record import as_record
+    from .estimators.diagnosis.own_effects import find_own_effects
+
+    record = as_record(result)
+    runs, _ = _calibrated_runs(sources, record, False)
+    try:
+        return find_own_effects(runs if len(runs) > 1 else runs[0], record, _diagnosis_config())
+    except ValueError as e:
+        result.warnings.append(f"own_effects: the runs were not diagnosed ({e})")
+        return None
 
 
 # ----------------------------------------------------------------------------------------------- correct
@@ -595,7 +614,7 @@ def compare(case, calibration=None, *, out=None, fmt: str = "png", accept_other_
 # ----------------------------------------------------------------------------------------------- diagnose
 def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", navigation: str = "auto",
              given=(), out=None, fmt: str = "png", progress: Callable[[str], None] | None = None,
-             accept_other_instrument: bool = False) -> "DiagnosisResult":
+             accept_other_instrument: bool = False, hold_own_effects: bool = True) -> "DiagnosisResult":
     """Where the sim-to-real gap of a run lies, which unmodelled effect causes it, how far it shrinks.
 
     Parameters
@@ -627,6 +646,10 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         Called with each fitted model's label (``effect`` in round 1, ``chosen+effect`` later).
     accept_other_instrument : bool
         Apply a calibration whose CALIB.json names another instrument (refused by default).
+    hold_own_effects : bool
+        The calibration's own runs: hold what they showed when calibrated (CALIB.json
+        ``own_effects``) at its values, so the diagnosis answers what changed since (default); False
+        diagnoses them afresh. Without ``given`` only.
 
     Returns
     -------
@@ -656,7 +679,7 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     notes = [n for _, ns in prepared for n in ns]
     run_cases, applied = _calibrated_runs(_keyed([s for s, _ in prepared]), cal, accept_other_instrument)
     notes += applied
-    config = _diagnosis_config(effects, attitude, navigation, given)
+    config = _diagnosis_config(effects, attitude, navigation, given, hold_own_effects)
     result = _diagnose(run_cases if many else run_cases[0], config, calibration=cal, progress=progress)
     if notes:
         result.base["case_warnings"] = notes
@@ -667,12 +690,13 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
     return result
 
 
-def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "auto", given=()) -> "DiagnosisConfig":
+def _diagnosis_config(effects=None, attitude: str = "auto", navigation: str = "auto", given=(),
+                      hold_own_effects: bool = True) -> "DiagnosisConfig":
     """The diagnosis options the API and the command line expose (the catalog's effects unless named)."""
     from .estimators.diagnosis.diagnose import DiagnosisConfig
 
     return DiagnosisConfig(effects=tuple(effects) if effects else DiagnosisConfig().effects, attitude=attitude,
-                           navigation=navigation, given=tuple(given or ()))
+                           navigation=navigation, given=tuple(given or ()), hold_own_effects=bool(hold_own_effects))
 
 
 def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=None, attitude: str = "auto",

@@ -165,8 +165,6 @@ def markdown_table(res: dict) -> str:
                          f"{r['detection_limit']:.2g}{' ' + r['unit'] if r['unit'] else ''})")
             elif r is not None and not r["hit"] and r.get("outcome", "").startswith(("below", "not tried", "outscored", "no gap")):
                 text += f" ({r['outcome'].split(' (')[0].split(':')[0]})"
-            if r is not None and "shift_z" in r:  # the file's own effect: its estimate moved, or not
-                text += f" (own {r.get('carrier', r['expected'])} moved {r['shift_z']:.1f} SE)"
             row.append(f"**{text}**" if r is not None and r["hit"] and error != "clean" else text)
         lines.append(f"| {error} {size:g} | " + " | ".join(row) + " |")
     return "\n".join(lines)
@@ -174,8 +172,8 @@ def markdown_table(res: dict) -> str:
 
 def limits_paragraph(res: dict, navigation: str = "random_walk") -> str:
     """docs/diagnosis.md's paragraph of the clean files' detection limits and of the misses, from the rows
-    as measured: per error each file's limit (the own effect whose shift carries it, 'over' where not even
-    the largest size searched shows, or read against the file's own delay peak), then the misses under
+    as measured: per error each file's limit ('over' where not even the largest size searched shows, or
+    read against the file's own delay peak), then the misses under
     and above their file's limit."""
     rows = [r for r in res["rows"] if r["navigation"] == navigation]
     files = list(dict.fromkeys(r["file"] for r in rows))
@@ -192,9 +190,7 @@ def limits_paragraph(res: dict, navigation: str = "random_walk") -> str:
                 continue
             r = mine[0]
             cell = f"{'over ' if r.get('detection_limit_beyond') else ''}{limit:.3g}"
-            if r.get("carrier"):
-                cell += f" (own {r['carrier']}'s shift)"
-            elif r.get("detection_limit_reason"):
+            if r.get("detection_limit_reason"):
                 peak = clean[f].get("attitude_delay_profile", {}).get("peak_s")
                 cell += f" (own delay peak at {peak:+.2f} s)" if peak is not None else " (own delay peak)"
             cells.append(cell)
@@ -224,8 +220,8 @@ def print_diagnosis(res: dict) -> None:
                   f"detection limits {limits}")
         print("      clean gaps: " + ", ".join(f"{f} {g:.3f}" for f, g in s["clean_gaps"].items()))
         for f, own in s.get("own_effects", {}).items():
-            print(f"      {f} names {', '.join(own)} on its clean run (counted above as an alarm; its injected runs are "
-                  "diagnosed on top of it)")
+            print(f"      {f}: its own {', '.join(own)} (found on top of its calibration, held in every run's diagnosis, "
+                  "as the calibration's own runs are diagnosed)")
     for m in res["missing"]:
         print(f"  missing: {m}")
     print("\n" + markdown_table(res) + "\n")

@@ -227,6 +227,11 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--compass-deviation-prior-deg", type=_deviation_prior_deg, default=None,
                        help="--compass-deviation auto: the one-cycle deviation left after the compass's own calibration, "
                             "one standard deviation of B and of C in degrees (default 1: the prior N(0, 1 deg^2) each)")
+        s.add_argument("--own-effects", default="auto", choices=["auto", "on", "off"],
+                       help="auto: one run whose beams take the sensor's samples (a real file) is diagnosed on top of "
+                            "the calibration and what it shows of its own is kept in CALIB.json, held when it is "
+                            "diagnosed again (which then answers what changed since); on: a --joint survey's runs too "
+                            "(one joint diagnosis); off: not diagnosed")
         s.add_argument("--standard-errors", default="hac", choices=["hac", "white"],
                        help="hac (Newey-West sandwich, coloured residuals) or white")
         s.add_argument("--declination-deg", type=_angle_deg,
@@ -267,6 +272,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--given", nargs="+", default=(), metavar="EFFECT",
                    help="effects the run is known to carry (e.g. what its clean run named): fitted first and kept, "
                         "the candidates judged on top of them")
+    s.add_argument("--ignore-own-effects", action="store_true",
+                   help="the calibration's own runs: do not hold what they showed when calibrated (CALIB.json "
+                        "own_effects), diagnose them afresh")
     s.add_argument("--navigation", default="auto", choices=["auto", "random_walk", "knots"],
                    help="the base's vessel velocity: random_walk (a velocity at every ping, its random-walk intensity "
                         "from the data: a real boat's speed changes between fixes are motion), knots (a smooth curve) "

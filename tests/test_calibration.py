@@ -544,3 +544,28 @@ def test_noise_levels_settle_at_their_fixed_point_whatever_they_start_from():
     for group, level in a.noise_sigma.items():
         assert abs(b.noise_sigma[group] / level - 1.0) < 0.02, group
     assert np.max(np.abs(a.radius_vectors_m - b.radius_vectors_m) / a.radius_vectors_se_m) < 0.1
+
+
+@pytest.mark.slow  # 25 s: `make test-slow`
+def test_one_real_run_keeps_what_it_shows_on_top_of_its_calibration(tmp_path):
+    """A real run (beams on the sensor's samples) is diagnosed on top of its fresh calibration and what
+    it shows is kept (CALIB.json ``own_effects``, read back onto the record); ``off`` skips it, and a
+    survey calibrated jointly is not diagnosed unless asked (``on``: one joint diagnosis)."""
+    from conftest import real
+
+    from adcpdyn import api
+    from adcpdyn.estimators.calibration.record import CalibrationRecord
+
+    path = real("RiverPro_test01.PD0")
+    case = api.import_file(path).case
+    result = api.calibrate(case, n_starts=4)
+    own = result.own_effects
+    assert own["navigation"] == "random_walk" and own["effects"] == [] and own["unknowns"] == {}
+    assert own["statement"].startswith("beams' attitude from the sensor's samples")
+    result.to_json(tmp_path / "c.json")
+    assert CalibrationRecord.from_json(tmp_path / "c.json").own_effects == own
+    assert api.calibrate(case, n_starts=4, own_effects="off").own_effects is None
+    halves = [api.import_file(path, end_s=90.0, name="a").case, api.import_file(path, start_s=90.0, name="b").case]
+    assert api.calibrate(halves, n_starts=2).own_effects is None
+    with pytest.raises(ValueError, match=r"CalibrationConfig.own_effects: expected one of \['auto', 'on', 'off'\]"):
+        CalibrationConfig(own_effects="yes")

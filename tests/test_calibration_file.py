@@ -61,6 +61,17 @@ def _set(path, value):
     return edit
 
 
+OWN = {"effects": ["compass_deviation", "sound_speed_error"], "navigation": "random_walk", "statement": "",
+       "unknowns": {"compass_deviation.A_rad": {"value": 0.17, "se": 0.10}, "compass_deviation.B_rad": {"value": -0.14, "se": 0.1},
+                    "compass_deviation.C_rad": {"value": -0.2, "se": 0.03},
+                    "sound_speed_error.relative_error": {"value": 0.022, "se": None}}}
+
+
+def _own(edit):
+    """A calibration carrying ``OWN`` (what its runs showed on top of it), edited."""
+    return lambda d: edit({**copy.deepcopy(d), "own_effects": copy.deepcopy(OWN)})
+
+
 BAD = {  # variant: (edit, the key the one-line error must name)
     "string angle": (_set(["installation_ypr_rad", 0], "0.1"), "installation_ypr_rad[0]"),
     "NaN heading misalignment": (_set(["heading_misalignment_rad"], float("nan")), "heading_misalignment_rad"),
@@ -94,7 +105,28 @@ BAD = {  # variant: (edit, the key the one-line error must name)
     "run without case": (_set(["runs"], [{"moving_bed_velocity_m_s": [0, 0]}]), "runs[0].case"),
     "run moving bed string": (_set(["runs"], [{"case": "a", "moving_bed_velocity_m_s": "slow"}]),
                               "runs[0].moving_bed_velocity_m_s"),
+    "own effect not in the catalog": (_own(_set(["own_effects", "effects", 1], "salinity")), "own_effects.effects"),
+    "own effect without its unknowns": (_own(_set(["own_effects", "effects"], ["compass_deviation", "sound_speed_error",
+                                                                              "heave"])), "own_effects.unknowns"),
+    "own unknown of another effect": (_own(_set(["own_effects", "unknowns", "moving_bed.velocity_north_m_s"],
+                                                {"value": 0.1, "se": 0.01})), "own_effects.unknowns.moving_bed.velocity_north_m_s"),
+    "own value NaN": (_own(_set(["own_effects", "unknowns", "compass_deviation.A_rad", "value"], float("nan"))),
+                      "own_effects.unknowns.compass_deviation.A_rad.value"),
+    "own value null": (_own(_set(["own_effects", "unknowns", "compass_deviation.A_rad", "value"], None)),
+                       "own_effects.unknowns.compass_deviation.A_rad.value"),
+    "own SE negative": (_own(_set(["own_effects", "unknowns", "compass_deviation.B_rad", "se"], -0.1)),
+                        "own_effects.unknowns.compass_deviation.B_rad.se"),
+    "own navigation": (_own(_set(["own_effects", "navigation"], "gnss")), "own_effects.navigation"),
 }
+
+
+def test_a_calibrations_own_effects_round_trip(written, tmp_path):
+    """What the runs showed on top of their calibration (``own_effects``) is read back onto the record as
+    written; a standard error not determined (null) stays null."""
+    d, _ = written
+    record = CalibrationRecord.from_json(_write(tmp_path, {**d, "own_effects": OWN}))
+    assert record.own_effects == OWN
+    assert CalibrationRecord.from_json(_write(tmp_path, d, "plain.json")).own_effects is None
 
 
 @pytest.mark.parametrize("kind", list(BAD))

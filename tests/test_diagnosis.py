@@ -184,14 +184,14 @@ def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
     assert calibration_base_note(record("knots"), other, ["compass_offset"], [score]) == ""
 
 
-@pytest.mark.slow  # 32 s: `make test-slow`
+@pytest.mark.slow  # 90 s: `make test-slow` (two calibrations, each diagnosing its run on top of itself)
 @pytest.mark.skipif(not (REAL / "winriver02_transect.PD0").is_file(), reason="real file absent")
 def test_a_gappy_real_run_calibrated_on_knots_is_told_to_recalibrate():
     """winriver02 cut to the shape of the held-back winriver02.PD0 (its first 64 s with GNSS, 170 s
     without pings, 25 more pings without GNSS): calibrated on knots its heading misalignment sits ~6 deg
     from the random-walk base's (and from the IGRF declination, 2 of its SEs), which the diagnosis names
-    as a compass offset and says may be the bases' difference; calibrated on the random walk it names
-    nothing there."""
+    as a compass offset and says may be the bases' difference (found by the calibration on top of itself,
+    and by a diagnosis that does not hold it); calibrated on the random walk it names nothing there."""
     from adcpdyn import api
 
     full = api.import_file(REAL / "winriver02_transect.PD0").case
@@ -201,9 +201,16 @@ def test_a_gappy_real_run_calibrated_on_knots_is_told_to_recalibrate():
     late = (ref.time_s - full.pings.time_s[0] >= 64)[:, None]
     case = case.replace(reference=dataclasses.replace(ref, velocity_m_s=np.where(late, np.nan, ref.velocity_m_s)))
     config = DiagnosisConfig(effects=("compass_offset", "moving_bed", "reference_latency"), navigation="random_walk")
-    on_knots = diagnose(case, config, calibration=as_record(api.calibrate(case, n_starts=8, navigation="knots")))
+    knots = as_record(api.calibrate(case, n_starts=8, navigation="knots"))
+    # the calibration finds it on top of itself, with the words, and keeps it: its runs diagnosed again hold it
+    assert "compass_offset" in knots.own_effects["effects"]
+    assert "calibrated on knots navigation while this base takes random_walk" in knots.own_effects["statement"]
+    assert diagnose(case, config, calibration=knots).verdict == "none"
+    on_knots = diagnose(case, dataclasses.replace(config, hold_own_effects=False), calibration=knots)
     assert "compass_offset" in on_knots.verdict and on_knots.base["calibration_on_another_base"]
-    on_walk = diagnose(case, config, calibration=as_record(api.calibrate(case, n_starts=8, navigation="random_walk")))
+    walk = as_record(api.calibrate(case, n_starts=8, navigation="random_walk"))
+    assert "compass_offset" not in walk.own_effects["effects"]
+    on_walk = diagnose(case, dataclasses.replace(config, hold_own_effects=False), calibration=walk)
     assert "compass_offset" not in on_walk.verdict and not on_walk.base["calibration_on_another_base"]
 
 
@@ -680,3 +687,32 @@ def test_an_effect_that_changes_no_prediction_has_a_held_out_z_of_zero():
     moved = cv_base + 0.01 * np.random.default_rng(1).standard_normal(cv_base.shape) * (bm.mask > 0)
     z = heldout_improvement_z(bm, moved, bm, cv_base, bf.sigma)
     assert np.isfinite(z) and z != 0.0
+
+
+@pytest.mark.slow  # 24 s: `make test-slow`
+def test_a_calibrations_own_effects_are_held_on_its_own_runs_only():
+    """What a calibration's runs showed on top of it (CALIB.json ``own_effects``) is held at its values
+    when those runs are diagnosed again: a run that has carried a 0.5-s attitude latency since it was
+    calibrated shows nothing new; the same data under another run's name, or with holding switched
+    off, name the latency; a further 0.5 s names it again, moved from its value by about that."""
+    from adcpdyn import api
+    from adcpdyn.estimators.diagnosis.field_errors import inject
+    from adcpdyn.estimators.diagnosis.own_effects import find_own_effects
+
+    case = inject(simulate(short_scenario(40.0), seed=3), "attitude_latency_s", 0.5)
+    record = as_record(api.calibrate(case, n_starts=2))
+    config = DiagnosisConfig(effects=("moving_bed", "attitude_latency"))
+    own = find_own_effects(case, record, config)
+    assert own["effects"][0] == "attitude_latency" and own["navigation"] == "knots"
+    value = own["unknowns"]["attitude_latency.delay_s"]["value"]
+    record = dataclasses.replace(record, own_effects=own)
+    held = diagnose(case, config, calibration=record)
+    assert held.verdict == "none" and f"attitude_latency.delay_s = {value:.4g} +- " in held.statement
+    assert "on top of what these runs showed when calibrated (held there)" in held.statement
+    assert diagnose(case.replace(name="another_run"), config, calibration=record).selected[0] == "attitude_latency"
+    assert diagnose(case, dataclasses.replace(config, hold_own_effects=False),
+                    calibration=record).selected[0] == "attitude_latency"
+    later = diagnose(inject(case, "attitude_latency_s", 0.5), config, calibration=record)
+    assert later.selected[0] == "attitude_latency"
+    moved = next(s for s in later.ranking if s["effect"] == "attitude_latency" and s["significant"])
+    assert moved["params"]["attitude_latency.delay_s"] - value == pytest.approx(0.5, abs=0.1)

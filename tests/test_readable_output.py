@@ -425,3 +425,20 @@ def test_the_effect_table_shows_each_step_of_the_forward_selection_with_shares_o
     assert rows["1 moving_bed"][5] == "0.445" and rows["2 moving_bed"][5] == "-0.167"
     assert rows["2 moving_bed"][6] == "26" and rows["1 compass_deviation"][6] == "98"  # (0.012 + 0.167) / 0.687
     assert "| 2 | moving_bed |" in table(r) and "| 26% |" in table(r)
+
+
+def test_calibrate_says_what_the_run_shows_of_its_own_in_its_units():
+    """The calibration's own-effects line: none said as such; each effect's unknowns in the field's units
+    (angles in degrees); the diagnosis's note when it read them on another base than the calibration's."""
+    from adcpdyn.cli.verbs.calibration import own_effects_line
+
+    none = own_effects_line({"effects": [], "unknowns": {}, "navigation": "random_walk", "statement": "none"})
+    assert none.startswith("own effects (") and none.endswith("): none")
+    note = ("these are the calibration's own runs, calibrated on knots navigation while this base takes random_walk: "
+            "compass_offset.A +5.7 +- 1.1 deg may be the two bases reading the same data apart")
+    line = own_effects_line({"effects": ["compass_offset", "sound_speed_error"], "navigation": "random_walk",
+                             "unknowns": {"compass_offset.A_rad": {"value": 0.1, "se": 0.02},
+                                          "sound_speed_error.relative_error": {"value": 0.022, "se": None}},
+                             "statement": "compass_offset explains the gap; " + note + " [base: pinned]"})
+    assert "compass_offset (A +5.73 deg ± 1.1 deg); sound_speed_error (relative_error +0.022 ± n/a)" in line
+    assert line.endswith(f"({note})")

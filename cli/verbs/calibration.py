@@ -40,6 +40,7 @@ def calibration_config(args, formulation=None, one=True):
                              navigation=args.navigation, moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
                              **prior,
                              standard_errors=args.standard_errors, magnetic_declination_rad=declination,
+                             own_effects=getattr(args, "own_effects", "auto"),
                              solver=SolverOptions(method=args.solver))
 
 
@@ -105,8 +106,29 @@ def _print_calibration(result, title: str) -> None:
         say(f"standard errors: {result.standard_errors['method']} (Newey-West lags {result.standard_errors['lags']}); "
             f"largest inflation over white noise x{inflation[worst]:.2f} ({worst})")
     say(noise_levels_line(result.noise_sigma))
+    own = result.own_effects
+    if own is not None:
+        say(own_effects_line(own))
     for w in result.warnings:
         warn(f"{w}")
+
+
+def own_effects_line(own: dict) -> str:
+    """What the runs showed diagnosed on top of the calibration, in one line, each unknown in its unit."""
+    from ...estimators.diagnosis.report import parameter_text
+    from ...estimators.diagnosis.statement import OTHER_BASE
+
+    head = "own effects (these runs diagnosed on top of the calibration, held when they are diagnosed again): "
+    if not own["effects"]:
+        return head + "none"
+    parts = []
+    for effect in own["effects"]:
+        mine = [parameter_text(n, v["value"], v["se"]) for n, v in own["unknowns"].items()
+                if n.split("/")[-1].split(".")[0] == effect]
+        parts.append(f"{effect} ({', '.join(mine)})")
+    statement = own.get("statement") or ""
+    other_base = statement[statement.find(OTHER_BASE):].split(" [base:")[0] if OTHER_BASE in statement else ""
+    return head + "; ".join(parts) + (f" ({other_base})" if other_base else "")
 
 
 def cmd_calibrate(args) -> int:

@@ -19,6 +19,12 @@ def cmd_diagnose(args) -> int:
     if args.given and (args.selftest or args.field_selftest):
         raise ValueError("diagnose: --given names a run's own effects; --selftest and --field-selftest find them "
                          "themselves (drop --given)")
+    if args.ignore_own_effects and (args.given or args.selftest or args.field_selftest or not args.calibration):
+        other = ("--given (given effects are fitted, nothing is held)" if args.given else
+                 "--selftest / --field-selftest (they find and hold the runs' own effects themselves)"
+                 if args.selftest or args.field_selftest else "no --calibration (nothing to hold)")
+        raise ValueError(f"--ignore-own-effects: drops what a calibration's own runs showed when calibrated; "
+                         f"with {other} it has nothing to do (drop it)")
     if args.selftest:
         return _diagnose_selftest(args)
     if args.field_selftest:
@@ -31,6 +37,7 @@ def cmd_diagnose(args) -> int:
     progress = DiagnosisProgress("diagnose", len(paths))
     result = diagnose(paths if args.joint else paths[0], args.calibration, effects=args.effects, attitude=args.attitude,
                       navigation=args.navigation, given=args.given, progress=progress.fitted_model,
+                      hold_own_effects=not args.ignore_own_effects,
                       accept_other_instrument=args.accept_other_instrument)
     progress(f"done: verdict {result.verdict}")
     for w in result.base.get("case_warnings", []):

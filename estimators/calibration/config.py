@@ -20,6 +20,7 @@ JACOBIANS = ("auto", "symbolic", "assembled")
 COMPILES = ("auto", "always", "never")
 MOVING_BED_CHOICES = ("auto", "off", "constant", "section")
 DEVIATION_CHOICES = ("auto", "on", "off")
+OWN_EFFECTS_CHOICES = ("auto", "on", "off")
 SE_METHODS = ("hac", "white")
 
 
@@ -124,6 +125,12 @@ class CalibrationConfig:
         ``auto`` for problems of at least ``COMPILE_MIN_PINGS`` pings (all runs; the Jacobian then
         assembled unless ``jacobian='symbolic'``, which compiles nothing), ``always`` (needs
         ``jacobian='assembled'``) or ``never``.
+    own_effects : str
+        ``auto``: one run whose beams take the sensor's samples (a real file) is then diagnosed on
+        top of the calibration and what it shows is kept with it (CALIB.json ``own_effects``), so a
+        later diagnosis of it holds that and answers what changed since
+        (:mod:`~adcpdyn.estimators.diagnosis.own_effects`); ``on``: a survey's runs too (one joint
+        diagnosis, minutes for many runs); ``off``: not diagnosed.
     solver : SolverOptions
     """
 
@@ -154,6 +161,7 @@ class CalibrationConfig:
     compass_deviation_prior_rad: float = float(np.deg2rad(1.0))
     standard_errors: str = "hac"
     magnetic_declination_rad: float | None = None
+    own_effects: str = "auto"
     solver: SolverOptions = field(default_factory=SolverOptions)
 
     def __post_init__(self):
@@ -161,7 +169,7 @@ class CalibrationConfig:
                               ("tangential", TANGENTIALS), ("attitude", ATTITUDES), ("jacobian", JACOBIANS),
                               ("moving_bed", MOVING_BED_CHOICES), ("compass_deviation", DEVIATION_CHOICES),
                               ("standard_errors", SE_METHODS), ("navigation", NAVIGATION_CHOICES),
-                              ("compile", COMPILES)):
+                              ("compile", COMPILES), ("own_effects", OWN_EFFECTS_CHOICES)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"CalibrationConfig.{name}: expected one of {list(allowed)}, got {getattr(self, name)!r}")
         if not 0 < float(self.compass_deviation_prior_rad) <= 0.5:

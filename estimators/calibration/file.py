@@ -154,6 +154,29 @@ def _runs(value, path, fail):
                 _check(KEYS[k], run[k], f"{p}.{k}", fail)
 
 
+def _own_effects(value, path, fail):
+    from ...models.effects import CATALOG
+
+    effects = _member(value, "effects", path, fail)
+    if not isinstance(effects, list) or any(e not in CATALOG for e in effects):
+        fail(f"{path}.effects", f"expected a list of catalog effects ({', '.join(CATALOG)})", _show(effects))
+    unknowns = _member(value, "unknowns", path, fail)
+    if not isinstance(unknowns, dict):
+        fail(f"{path}.unknowns", 'expected an object {"effect.unknown": {"value": ..., "se": ...}}', _show(unknowns))
+    for name, v in unknowns.items():
+        p = f"{path}.unknowns.{name}"
+        if name.split("/")[-1].split(".")[0] not in effects:
+            fail(p, f"expected an unknown of one of the effects {effects}", _show(name))
+        if not isinstance(v, dict):
+            fail(p, 'expected an object {"value": ..., "se": ...}', _show(v))
+        _check(Key("number", nulls=NONE), _member(v, "value", p, fail), f"{p}.value", fail)
+        _check(Key("number", low=0.0), _member(v, "se", p, fail), f"{p}.se", fail)
+    if not all(any(n.split("/")[-1].split(".")[0] == e for n in unknowns) for e in effects):
+        fail(f"{path}.unknowns", f"expected the unknowns of every effect {effects}", _show(sorted(unknowns)))
+    _check(Key("string", choices=("knots", "random_walk")), _member(value, "navigation", path, fail),
+           f"{path}.navigation", fail)
+
+
 def _members(spec: dict):
     def check(value, path, fail):
         for k, key in spec.items():
@@ -225,6 +248,7 @@ KEYS: dict[str, Key] = {
     "instrument": Key("object", check=_instrument),  # make, model, serial, frequency, beam angle, beams, sensor frame
     "site": Key("object", check=_site),  # the runs' mean position and UTC span
     "moving_bed_test": Key("object"),  # --moving-bed auto: speed, SE, threshold, percent of flow, decision
+    "own_effects": Key("object", check=_own_effects),  # what the runs show on top of the calibration (diagnosed)
 }
 
 # A file holding none of these is not a calibration.

@@ -190,6 +190,7 @@ class CalibrationRecord:
     instrument: InstrumentIdentity | None = None
     site: Site | None = None
     source_sha256: str | None = None
+    own_effects: dict | None = None  # what these runs showed on top of the calibration: held when they are diagnosed
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -269,6 +270,7 @@ class CalibrationRecord:
             source=c.source, data=c,
             instrument=InstrumentIdentity.from_dict(c["instrument"]) if c.get("instrument") else None,
             site=Site.from_dict(c["site"]) if c.get("site") else None, source_sha256=source_sha256,
+            own_effects=c.get("own_effects") or None,
         )
 
     # ------------------------------------------------------------------ what the readers use

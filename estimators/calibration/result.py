@@ -155,6 +155,9 @@ class CalibrationResult:
     instrument: InstrumentIdentity | None = None  # whose calibration it is (schema 3)
     site: Site | None = None  # the runs' mean position and UTC span
     moving_bed_test: dict | None = None  # --moving-bed auto: the bed's speed, SE, threshold and the decision
+    # what the runs show on top of the calibration ({"effects", "unknowns", "navigation", "statement"}), None if not
+    # diagnosed: held by a later diagnosis of these runs (estimators.diagnosis.own_effects)
+    own_effects: dict | None = None
 
     @property
     def success(self) -> bool:
@@ -230,6 +233,7 @@ class CalibrationResult:
             "instrument": None if self.instrument is None else self.instrument.to_dict(),
             "site": None if self.site is None else self.site.to_dict(),
             "moving_bed_test": self.moving_bed_test,
+            "own_effects": self.own_effects,
         }
         if self.moving_bed == "section":
             out["moving_bed"].update({"section_positions": np.linspace(0, 1, len(self.moving_bed_knots_m_s)).tolist(),

@@ -6,6 +6,8 @@ difference counts. A module of their own because the base fit (:mod:`.base`), th
 
 from __future__ import annotations
 
+import dataclasses
+
 import os
 from dataclasses import dataclass
 
@@ -55,10 +57,16 @@ class DiagnosisConfig:
 
     ``given`` effects (a file's own, found on its clean run) are fitted first and stay in every
     model: the candidates are judged on top of them, and they are reported with their estimates.
+    With ``given_values`` ((unknown, value, standard error) of every given effect's unknowns) they
+    are held there instead, and each given effect is also a candidate: that effect moved from those
+    values (an error since then that a given effect carries, a compass offset in a deviation's
+    constant, a sound speed beyond the one found, a heave at another frequency).
     """
 
     effects: tuple = tuple(CATALOG)
     given: tuple = ()  # effects the run is known to carry (a clean file's own): fitted in every model, not candidates
+    given_values: tuple = ()  # ((unknown, value, se), ...): the given effects held at these values
+    hold_own_effects: bool = True  # a calibration's own runs: its own effects (CALIB.json own_effects) held, if no given
     cv_folds: int = 5
     cv_block_s: float = 2.0
     cv_block_walk_s: float = 20.0
@@ -84,6 +92,10 @@ class DiagnosisConfig:
     def __post_init__(self):
         for name in self.effects + self.given:
             get_effect(name)
+        held = {str(n).split("/")[-1].split(".")[0] for n, *_ in self.given_values}
+        if held and held != set(self.given):
+            raise ValueError(f"given_values: expected the unknowns of every given effect {sorted(self.given)}, "
+                             f"got those of {sorted(held)}")
         if self.attitude not in ATTITUDES:
             raise ValueError(f"attitude: expected one of {list(ATTITUDES)}, got {self.attitude!r}")
         if self.cv_folds < 2:
@@ -99,3 +111,10 @@ class DiagnosisConfig:
             raise ValueError(f"heldout_z_walk: expected a finite z threshold, got {self.heldout_z_walk}")
         if not self.min_gain_walk >= 0:
             raise ValueError(f"min_gain_walk: expected a held-out excess >= 0, got {self.min_gain_walk}")
+
+
+def holding(config: DiagnosisConfig, own: dict) -> DiagnosisConfig:
+    """``config`` with the runs' ``own`` effects ({"effects", "unknowns": {unknown: {"value", "se"}}},
+    :func:`.own_effects.find_own_effects`) given and held at their values."""
+    return dataclasses.replace(config, given=tuple(own["effects"]),
+                               given_values=tuple((n, v["value"], v["se"]) for n, v in own["unknowns"].items()))

@@ -32,7 +32,7 @@ from ..calibration.record import CalibrationRecord
 from . import where as where_mod
 from .base import (applicable, effect_of, effect_terms, fit_base, group_sigma, noise_from_data, pinned_effect_parameters,
                    variance_components, velocity_error)
-from .config import DiagnosisConfig
+from .config import DiagnosisConfig, holding
 from .covariance import coloured_covariance
 from .heldout import cv_residuals, heldout_gap
 from ..measurement_model import PRIOR_GROUPS
@@ -102,9 +102,15 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             raise ValueError(f"{case.name}: /attitude: heading, pitch and roll never change (no attitude recorded?); "
                              "the gap diagnosis needs a measured attitude")
     base, base_model, base_fit, sigma_fit = fit_base(cases, config, calibration)
+    own = calibration_own_effects(calibration, cases, config, base)
+    if own:  # what these runs showed when calibrated: held there, the question is what changed since
+        config = holding(config, own)
     peaks = residual_peaks(base_model, base_fit)
     fits = {"base": (base_model, base_fit)}
-    skipped, candidates = {}, []
+    # the given effects held at the runs' own values, each also a candidate: that it moved from there
+    own_values = {n: (float(v), np.nan if se is None else float(se)) for n, v, se in config.given_values}
+    base.held = {n: v for n, (v, _) in own_values.items()}
+    skipped, candidates = {}, [n for n in config.given if own_values]
     for name in config.effects:
         if name in config.given:
             continue
@@ -121,10 +127,16 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
 
     profile_hints = {}  # a velocity scale's maximum and SE from its last profile
 
-    def refit(selected_terms, name, start_fit):
-        terms = selected_terms + effect_terms(base, name)
+    def refit(selected_terms, name, start_fit, moved=False):
+        """``name`` refitted on top of ``selected_terms``; ``moved``: a held given effect freed from its values."""
+        terms = list(selected_terms) if moved else selected_terms + effect_terms(base, name)
+        base_now = released(base, name) if moved else base
+        return _refit(base_now, terms, name, start_fit)
+
+    def _refit(base, terms, name, start_fit):
         values = start_fit.values
-        if base_model.random_walk and any(t.effect.name == "reference_latency" for t in terms):
+        held_delay = any(n.endswith(REFERENCE_DELAY) for n in base.held)  # the runs' own, where it is held
+        if base_model.random_walk and any(t.effect.name == "reference_latency" for t in terms) and not held_delay:
             return delay_profile(base, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
         model = GapModel(base, terms, peaks, solver=config.solver)
         pinned = pinned_effect_parameters(model, base)
@@ -132,7 +144,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             scaled = [n for n in model.names if n.endswith(VELOCITY_SCALES)]
             mine = [n for n in scaled if effect_of(n) == name]
             pinned.update({n: float(values[n]) for n in scaled if n not in mine and n in values})
-            if len(mine) == 1:  # started about an earlier round's maximum, where there is one
+            if len(mine) == 1 and mine[0] not in base.held:  # started about an earlier round's maximum, where there is one
                 model, fit = marginal_profile(model, mine[0], values, start_fit.sigma, pinned, config, terms, peaks,
                                                profile_hints.get(mine[0]))
                 if np.isfinite(fit.profile_se[mine[0]]):
@@ -140,6 +152,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                 return model, fit
         extra = [o for t in effect_terms(base, name) for o in t.effect.extra_starts()]
         starts = [model.start(values)] + [model.start(values, _renamed(model, o)) for o in extra]
+        if name in config.given and name not in {effect_of(n) for n in base.held}:  # moved: also from its own fresh start
+            starts.append(model.start({k: v for k, v in values.items() if not (k in model.effect_names and effect_of(k) == name)}))
         best = None
         for x0 in starts:
             f = model.solve(x0, start_fit.sigma, fixed=pinned)
@@ -181,12 +195,15 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         fits[current_name] = current
         cv[current_name] = held_out(*current)
         gm, gf = current
-        idx = [gm.names.index(n) for n in gm.effect_names]
-        cov = coloured_covariance(gf, gm, idx)
-        given = {n: {"value": float(gf.x[i]), "se": float(gf.profile_se.get(n, np.sqrt(cov[j, j])))}
-                 for j, (n, i) in enumerate(zip(gm.effect_names, idx))}
-        # how the given unknowns co-vary (a compass deviation's A, B, C on one course): what a shift of them is judged by
-        given_covariance = {"names": list(gm.effect_names), "matrix": cov.tolist()}
+        if own_values:  # held where the runs' own values put them: their standard errors are those values'
+            given = {n: {"value": v, "se": se} for n, (v, se) in own_values.items()}
+        else:
+            idx = [gm.names.index(n) for n in gm.effect_names]
+            cov = coloured_covariance(gf, gm, idx)
+            given = {n: {"value": float(gf.x[i]), "se": float(gf.profile_se.get(n, np.sqrt(cov[j, j])))}
+                     for j, (n, i) in enumerate(zip(gm.effect_names, idx))}
+            # how the given unknowns co-vary (a compass deviation's A, B, C on one course): what a shift of them is judged by
+            given_covariance = {"names": list(gm.effect_names), "matrix": cov.tolist()}
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
 
     def gain(s: EffectScore) -> float:  # the BIC change that decides: the coloured-residual one
@@ -200,7 +217,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         labels = {name: name if round_ == 1 else "+".join(selected + [name]) for name in todo}
 
         def one(name, terms=tuple(selected_terms), start=current[1]):
-            model, f = refit(list(terms), name, start)
+            model, f = refit(list(terms), name, start, moved=name in config.given)
             residuals = held_out(model, f)
             if progress:
                 progress(labels[name])
@@ -256,7 +273,10 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                                  "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
                                                    "gap_after": s.gap_after, **reading_of(s, cases)} for s in close]})
         selected.append(best.effect)
-        selected_terms += effect_terms(base, best.effect)
+        if best.effect in config.given:  # moved from the runs' own values: free from here on
+            base = released(base, best.effect)
+        else:
+            selected_terms += effect_terms(base, best.effect)
         current_name = tried[best.effect][0]
         current = fits[current_name]
 
@@ -308,7 +328,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     for sc in chosen if selected else []:
         statement += "".join(f"; {sc.effect}: {r['text']}" for r in reading_of(sc, cases).values())
     if given:
-        statement = ("on top of the run's own " + ", ".join(f"{n} = {v['value']:.4g} +- {v['se']:.2g}" for n, v in given.items())
+        whose = "what these runs showed when calibrated (held there), " if own else "the run's own "
+        statement = ("on top of " + whose + ", ".join(f"{n} = {v['value']:.4g} +- {v['se']:.2g}" for n, v in given.items())
                      + ": " + statement)
     if base.sampled:
         reasons = "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs if r.attitude_source == "samples"))
@@ -348,6 +369,24 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         confounded=confounded,
         alternatives=alternatives,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
+
+
+def calibration_own_effects(calibration, cases, config: DiagnosisConfig, base) -> dict | None:
+    """The calibration's own effects (CALIB.json ``own_effects``) where they apply: these runs are its
+    own, none are given, ``config.hold_own_effects``, and this base's navigation is the one they were
+    found on. None otherwise."""
+    own = getattr(calibration, "own_effects", None)
+    if not own or not own["effects"] or config.given or not config.hold_own_effects:
+        return None
+    navigation = ", ".join(dict.fromkeys(r.navigation for r in base.runs))
+    if navigation != own["navigation"] or not all(calibration.holds(c) for c in cases):
+        return None
+    return own
+
+
+def released(base, name: str):
+    """``base`` with the held unknowns of effect ``name`` freed (the effect moved from the runs' own values)."""
+    return dataclasses.replace(base, held={k: v for k, v in base.held.items() if effect_of(k) != name})
 
 
 def _renamed(model: GapModel, overrides: dict) -> dict:

@@ -58,19 +58,6 @@ def detection_limit(error: str, limits: dict) -> float | None:
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 
 
-def shift_signature(cases, error: str) -> dict:
-    """How one unit of ``error`` (its unit) as :func:`inject_survey` writes it into ``cases`` (one
-    run or a survey's) moves its catalog effect's unknowns (unknown -> change per unit): a compass
-    offset only the constant term A (a compass deviation's B and C stay), a bed across the survey's
-    mean course its north and east components."""
-    if error not in ERROR_UNKNOWNS:
-        return {}
-    names, per_unit, _ = ERROR_UNKNOWNS[error]
-    if per_unit is None:  # the bed: across the survey's mean course
-        per_unit = tuple(float(c) for c in _across(survey_course(cases)))
-    return dict(zip(names, per_unit))
-
-
 def _across(course_rad: float) -> np.ndarray:
     """The horizontal unit vector (north, east) across ``course_rad`` to its left: where an
     injected bed moves."""

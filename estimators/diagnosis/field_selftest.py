@@ -15,12 +15,11 @@ import numpy as np
 
 from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
-from ...models.effects import get_effect
-from .base import effect_of
-from .config import DiagnosisConfig
+from .config import DiagnosisConfig, holding
 from .diagnose import diagnose
 from ..run_setup import has_moving_reference
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey, shift_signature
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey
+from .own_effects import find_own_effects
 from .signal_limit import own_delay_profile, signal_limit
 
 
@@ -28,12 +27,14 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
                    sizes: dict | None = None, progress=None) -> dict:
     """Diagnose ``case`` (a run, or a survey's runs jointly) clean and with every field error of
     ``sizes`` ({error: sizes}, default the field's typical ones of the errors ``config.effects``
-    can name, :func:`default_sizes`) injected, blind.
+    can name, :func:`default_sizes`) injected, blind, as ``adcpdyn diagnose`` would with the
+    calibration: the file's own effects (the calibration's ``own_effects``, else found here,
+    :func:`.own_effects.find_own_effects`) held at their values, each a candidate for having moved.
 
     Returns ``{"rows": [...], "summary": {...}}``: one row per run (error, size, verdict, whether the
     error's effect was named first, the shrink and estimate reported for that effect, the gap
     and its z, seconds); the summary per error (top-1, smallest size detected) and the clean
-    run's verdict (anything named there is a false alarm or the file's own effect).
+    run's verdict (anything named there beyond the file's own effects is a false alarm).
     """
     sizes = sizes or default_sizes(config)
     runs = [case] if isinstance(case, Case) else list(case)
@@ -41,16 +42,21 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
     moving = all(has_moving_reference(c) for c in runs)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
-    rows, own, own_values, limits, beyond, reasons = [], (), {}, {}, {}, {}
+    tic = time.perf_counter()
+    first = diagnose(case, dataclasses.replace(config, hold_own_effects=False), calibration=calibration)
+    recorded = getattr(calibration, "own_effects", None)
+    own = recorded if recorded and recorded["navigation"] == first.base["navigation"] else \
+        find_own_effects(case, calibration, config, first=first)
+    held = holding(config, own) if own["effects"] else config
+    rows, limits, beyond, reasons = [], {}, {}, {}
     for error, size in trials:
         run = case if error == "clean" else inject_survey(runs, error, size)
-        tic = time.perf_counter()
-        # the clean file's own effects are the file's: every injected error is diagnosed on top of them
-        r = diagnose(run, dataclasses.replace(config, given=own) if own else config, calibration=calibration)
+        if error != "clean" or own["effects"]:
+            tic = time.perf_counter()
+            r = diagnose(run, held, calibration=calibration)
+        else:
+            r = first
         seconds = time.perf_counter() - tic  # one diagnosis, what a user waits for (not the own effects' rounds)
-        if error == "clean":
-            own, own_values = _own_effects(case, config, calibration, r)
-            navigation = r.base["navigation"]
         expected = "none" if error == "clean" else FIELD_ERRORS[error][0]
         mine = next((s for s in r.ranking if s["effect"] == expected and s["round"] == 1), None)
         row = {"error": error, "size": size, "unit": FIELD_ERRORS[error][1] if error != "clean" else "",
@@ -58,15 +64,11 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
                "shrink": mine["shrink_fraction"] if mine else None, "estimate": mine["params"] if mine else None,
                "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
                "seconds": seconds, "statement": r.statement}
-        row["detection_limit"] = limits.get(error)
-        row["detection_limit_beyond"] = beyond.get(error, False)  # not even the largest size searched shows
-        row["detection_limit_reason"] = reasons.get(error)
-        row["outcome"] = outcome(row, mine, r, config.min_gap)
         if error == "clean":
-            row["verdict"] = "+".join(own) or "none"
-            # the file's detection limits, before anything is injected: what each error's effect would need
-            first = {sc["effect"]: sc for sc in r.ranking if sc["round"] == 1}
-            limits = {e: detection_limit(e, first[spec[0]]["detection_limit"]) if spec[0] in first else None
+            # the file's detection limits, before anything is injected: what each error's effect would need on
+            # top of the file's own (a given effect's: its moving from its values)
+            first_round = {sc["effect"]: sc for sc in r.ranking if sc["round"] == 1}
+            limits = {e: detection_limit(e, first_round[spec[0]]["detection_limit"]) if spec[0] in first_round else None
                       for e, spec in FIELD_ERRORS.items()}
             # what the file could show of each error at best (its forward signature): where it asks for more than
             # the effect's own linearised limit, or the effect has none (tilt low-pass, heave), it is the limit
@@ -77,10 +79,7 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
                     limits[e] = sl["size"]
                     beyond[e] = sl["beyond"]
             row["signal_limits"] = signal
-            for e, spec in FIELD_ERRORS.items():  # an error the file's own effects carry: what moving them takes
-                if (mover := carrier(spec[0], own)) and (limit := moved_limit(own_values[mover], shift_signature(case, e))):
-                    limits[e], beyond[e] = limit, False
-            if any(e == "attitude_latency_s" for e, _ in trials) and not carrier("attitude_latency", own):
+            if any(e == "attitude_latency_s" for e, _ in trials) and "attitude_latency" not in own["effects"]:
                 profile = own_delay_profile(*r.fits["base"], config)
                 if profile is not None:
                     row["attitude_delay_profile"] = profile
@@ -92,18 +91,18 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
                             "is read against that peak, not zero")
             row["detection_limits"] = limits
             row["detection_limit_reasons"] = reasons
-            row["own_effects"] = list(own)
-        elif mover := carrier(expected, own):  # the file carries it already: named when its estimate moves its way
-            row.update(_moved({k: v for k, v in r.given.items() if k.split("/")[-1].startswith(mover + ".")},
-                              own_values[mover], shift_signature(case, error), r.given_covariance), carrier=mover)
-            row["outcome"] = (f"own effect, estimate moved {row['shift_z']:.1f} SE" + ("" if row["hit"] else " (not named)")
-                              + ("" if row["size_estimate"] is None else
-                                 f"; size from the shift {row['size_estimate']:.3g} +- {row['size_se']:.2g}"))
+            row["own_effects"] = list(own["effects"])
+        row["detection_limit"] = limits.get(error)
+        row["detection_limit_beyond"] = beyond.get(error, False)  # not even the largest size searched shows
+        row["detection_limit_reason"] = reasons.get(error)
+        row["outcome"] = outcome(row, mine, r, config.min_gap)
         rows.append(row)
         if progress:
             progress(f"{error} {size:g}: {r.verdict}")
-    return {"case": "+".join(c.name for c in runs), "rows": rows, "summary": summarise(rows), "navigation": navigation,
-            "own_effects": list(own), "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+    return {"case": "+".join(c.name for c in runs), "rows": rows, "summary": summarise(rows),
+            "navigation": first.base["navigation"], "own_effects": list(own["effects"]),
+            "own_effects_from": "calibration" if own is recorded else "found here",
+            "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
 
 
 def default_sizes(config: DiagnosisConfig) -> dict:
@@ -111,37 +110,6 @@ def default_sizes(config: DiagnosisConfig) -> dict:
     whose catalog effect the diagnosis tries (``config.effects``): an error no candidate could name
     is not injected to be counted a miss."""
     return {e: spec[2] for e, spec in FIELD_ERRORS.items() if spec[0] in config.effects}
-
-
-def _own_effects(case, config: DiagnosisConfig, calibration, first) -> tuple:
-    """The clean file's own effects and their joint estimates (effect -> {"params", "params_se"}): what
-    its diagnosis names, then what it names on top of those given, until nothing more (at most
-    ``config.max_effects``). The forward selection's later rounds judge against a held-out gap the
-    chosen effects have already emptied, so a file whose own effects are several (winriver01:
-    compass deviation, then an attitude delay and a moving bed on top of it given) would otherwise
-    have them named in every injected run instead of the injected error."""
-    own, r, given = tuple(first.selected), first, ()
-    while r.selected and len(own) < config.max_effects:
-        r, given = diagnose(case, dataclasses.replace(config, given=own), calibration=calibration), own
-        own = own + tuple(n for n in r.selected if n not in own)
-    if not own:
-        return own, {}
-    if given != own:
-        r = diagnose(case, dataclasses.replace(config, given=own), calibration=calibration)
-    values = {}
-    for name, v in r.given.items():  # full names: a survey's per-run effects (its beds) one per run
-        entry = values.setdefault(effect_of(name), {"params": {}, "params_se": {}})
-        entry["params"][name], entry["params_se"][name] = v["value"], v["se"]
-    for entry in values.values():
-        full = list(entry["params"])
-        entry["covariance"] = _covariance_of(r.given_covariance, full, [r.given[n]["se"] for n in full])
-    return own, values
-
-
-def carrier(effect: str, own) -> str | None:
-    """The file's own effect that carries ``effect``: itself, or one containing it as a special case
-    (a compass offset is the constant term of a compass deviation)."""
-    return next((o for o in own if o == effect or effect in get_effect(o).nests), None)
 
 
 def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
@@ -175,78 +143,6 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     if not mine["significant"]:
         return f"below detection ({detail})"
     return f"outscored by {row['verdict'].split('+')[0]} ({detail})"
-
-
-MOVED_Z = 3.0  # an own effect's estimate moved this many standard errors the error's way: the error is told
-
-
-def _covariance_of(covariance: dict | None, names: list, se: list) -> np.ndarray:
-    """The covariance of ``names`` with standard errors ``se``: correlations from ``covariance``
-    ({"names", "matrix"}, a diagnosis's ``given_covariance``) where it holds them all, else none."""
-    se = np.asarray(se, dtype=float)
-    corr = np.eye(len(names))
-    if covariance and all(n in covariance.get("names", []) for n in names):
-        i = [covariance["names"].index(n) for n in names]
-        M = np.asarray(covariance["matrix"], dtype=float)[np.ix_(i, i)]
-        sd = np.sqrt(np.maximum(np.diag(M), 0.0))
-        ok = sd > 0
-        corr[np.ix_(ok, ok)] = M[np.ix_(ok, ok)] / np.outer(sd[ok], sd[ok])
-    return corr * np.outer(se, se)
-
-
-def _along(C: np.ndarray, e: np.ndarray) -> float:
-    """The standard error of a size estimated along signature ``e`` from unknowns of covariance ``C``
-    (generalised least squares: 1 / sqrt(e' C^-1 e)); inf when ``e`` is empty or not determined."""
-    info = float(e @ np.linalg.pinv(C) @ e) if e.any() else 0.0
-    return 1.0 / np.sqrt(info) if info > 0 else np.inf
-
-
-def _clean_covariance(clean: dict, keys: list) -> np.ndarray:
-    """The clean file's covariance of its own effect's unknowns ``keys`` (in that order): its
-    ``covariance`` (rows in the order of its ``params``), else its standard errors alone."""
-    C = clean.get("covariance")
-    if C is None:
-        return np.diag([clean["params_se"][k] ** 2 for k in keys])
-    at = [list(clean["params"]).index(k) for k in keys]
-    return np.asarray(C)[np.ix_(at, at)]
-
-
-def _signature_vector(signature: dict, keys: list) -> np.ndarray:
-    """The error's signature (unknown suffix -> change per unit) on the unknowns ``keys``."""
-    return np.array([signature.get(k.rsplit(".", 1)[-1], 0.0) for k in keys])
-
-
-def moved_limit(clean: dict, signature: dict) -> float | None:
-    """The smallest error :func:`_moved` names on a file whose own effect carries it: MOVED_Z
-    standard errors of the size read from the shift, the clean and the injected estimates
-    counted as independent (sqrt 2 of the clean one's); None without a signature."""
-    keys = list(clean["params"])
-    se = _along(_clean_covariance(clean, keys), _signature_vector(signature, keys))
-    return float(MOVED_Z * np.sqrt(2.0) * se) if np.isfinite(se) else None
-
-
-def _moved(given: dict, clean: dict, signature: dict, covariance: dict | None = None) -> dict:
-    """An injected error of an effect the clean file carries: the shift of its unknowns from the clean
-    file's estimates, read as a size of the error along its ``signature`` (unknown suffix -> change
-    per unit, :func:`.field_errors.shift_signature`) by generalised least squares with the two
-    estimates' covariances summed (a compass offset moves a deviation's A alone, so A's share that B
-    and C stand in for on one course does not hide it); named when that size is beyond MOVED_Z of
-    its standard errors the error's way. Without a signature, the largest single shift in its own
-    standard errors (either way) is reported and nothing is named."""
-    names = [n for n in given if n in clean["params"]]
-    d = np.array([given[n]["value"] - clean["params"][n] for n in names])
-    C = _covariance_of(covariance, names, [given[n]["se"] for n in names]) + _clean_covariance(clean, names)
-    e = _signature_vector(signature, names)
-    se = _along(C, e)
-    if np.isfinite(se):
-        size = float(se ** 2 * (e @ np.linalg.pinv(C) @ d))
-        z = size / se
-    else:
-        size, sd = None, np.sqrt(np.maximum(np.diag(C), 0.0))
-        z = float(np.max(np.abs(d) / np.where(sd > 0, sd, np.inf), initial=0.0))
-    return {"hit": bool(size is not None and z > MOVED_Z), "estimate": {k: v["value"] for k, v in given.items()},
-            "se": {k: v["se"] for k, v in given.items()}, "shift_from_clean": dict(zip(names, d.tolist())),
-            "shift_z": float(z), "size_estimate": size, "size_se": float(se) if size is not None else None}
 
 
 def summarise(rows: list) -> dict:
@@ -287,14 +183,9 @@ def format_field_selftest(res: dict) -> str:
     own = res.get("own_effects") or []
     if own:
         lines.append("")
-        lines.append(f"The clean file names {', '.join(own)} itself: the file's own, kept in every injected run's model, so "
-                     "the table's verdicts are what is found on top of it; an error of that same effect is named when its "
-                     "estimate moves beyond 3 standard errors the error's way:")
-        for r in res["rows"]:
-            if "shift_z" in r:
-                moved = ", ".join(f"{k} {v:+.3g}" for k, v in r["shift_from_clean"].items())
-                lines.append(f"- {r['error']} {r['size']:g} {r['unit']}: moved {moved} ({r['shift_z']:.1f} SE): "
-                             f"{'named' if r['hit'] else 'not named'}")
+        lines.append(f"The file's own effects ({', '.join(own)}; {res.get('own_effects_from', 'found here')}) are held at "
+                     "their values in every run's model, as a diagnosis of the calibration's own runs holds them: the "
+                     "verdicts are what changed on top of them (a given effect named: it moved from its values).")
     lines.append("")
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
                  f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} not under the "

@@ -65,7 +65,9 @@ class Pins:
 class DiagnosisBase:
     """What every model of one diagnosis shares: the runs, the base's model spec, the pins
     and the starting noise levels per (run, group); ``noise_moved``: the largest relative move of a
-    noise level at the last of a random walk's re-estimations (None on knots)."""
+    noise level at the last of a random walk's re-estimations (None on knots); ``held``: effect
+    unknowns held at the runs' own values (found on them before, e.g. by their calibration), in
+    every model that carries them."""
 
     runs: list
     spec: ModelSpec
@@ -73,6 +75,7 @@ class DiagnosisBase:
     sigma0: dict
     notes: list = field(default_factory=list)
     noise_moved: float | None = None
+    held: dict = field(default_factory=dict)
 
     @property
     def sampled(self) -> bool:
@@ -173,6 +176,10 @@ class GapModel:
         for name, value in base.pins.values.items():  # calibrated quantities: held where the calibration put them
             i = self.names.index(name)
             self.lbx[i] = self.ubx[i] = value
+        for name, value in base.held.items():  # the runs' own effects, where this model carries them
+            if name in self.names:
+                i = self.names.index(name)
+                self.lbx[i] = self.ubx[i] = value
         self.effect_index = np.concatenate([u.index(f"effect{i}") for i in range(len(self.effects))] or [np.zeros(0, int)])
         self.effect_index = [int(i) for i in self.effect_index]
         self.effect_names = [self.names[i] for i in self.effect_index]

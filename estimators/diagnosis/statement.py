@@ -55,6 +55,9 @@ def reading_of(score: EffectScore, cases: list) -> dict:
 RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects on quantities a calibration fits
 
 
+OTHER_BASE = "these are the calibration's own runs, calibrated on"  # the note's opening words (calibrate quotes it)
+
+
 def calibration_base_note(calibration, base, selected: list, ranking: list) -> str:
     """What to say when the runs diagnosed are the calibration's own, calibrated on another
     navigation than this base's, and an effect on a quantity the calibration fitted (heading, bed)
@@ -83,7 +86,7 @@ def calibration_base_note(calibration, base, selected: list, ranking: list) -> s
     extra = ""
     if calibration.heading_misalignment_se_rad is not None and any(n.startswith("compass") for n in named):
         extra = f" (the calibration's heading misalignment: +- {np.degrees(calibration.heading_misalignment_se_rad):.2g} deg)"
-    return (f"these are the calibration's own runs, calibrated on {calibrated} navigation while this base takes {here}: "
+    return (f"{OTHER_BASE} {calibrated} navigation while this base takes {here}: "
             f"{', '.join(found)}{extra} may be the two bases reading the same data apart rather than a change since the "
             f"calibration; to tell, calibrate with --navigation {here} (this base) and diagnose again: what is still "
             f"named then is in these runs' data, not the bases' difference")
