@@ -200,6 +200,10 @@ def test_contradicting_options_and_wrong_files_are_refused_in_one_line_naming_th
         ("correct", str(case), "--out", f"{out}.csv"): "--out: expected OUT.h5",
         ("diagnose", "--selftest", "3", str(case)): "--selftest 3 simulates its own cases",
         ("diagnose", str(case), "--out", f"{out}.h5"): "--out: expected a file name ending in .json",
+        ("diagnose", str(case), "--ignore-own-effects", "--out", f"{out}.json"):
+            "--ignore-own-effects: drops what a calibration's own runs showed when calibrated; with no --calibration",
+        ("diagnose", str(case), "--given", "heave", "--ignore-own-effects", "--out", f"{out}.json"):
+            "with --given (given effects are fitted, nothing is held)",
         ("info", str(calib)): "got a JSON file (a CALIB.json",
         ("info", str(nc)): "got a netCDF file (an export",
     }
