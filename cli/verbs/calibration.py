@@ -116,6 +116,7 @@ def _print_calibration(result, title: str) -> None:
 def own_effects_line(own: dict) -> str:
     """What the runs showed diagnosed on top of the calibration, in one line, each unknown in its unit."""
     from ...estimators.diagnosis.report import parameter_text
+    from ...models.effects import effect_of
     from ...estimators.diagnosis.statement import OTHER_BASE
 
     head = "own effects (these runs diagnosed on top of the calibration, held when they are diagnosed again): "
@@ -124,7 +125,7 @@ def own_effects_line(own: dict) -> str:
     parts = []
     for effect in own["effects"]:
         mine = [parameter_text(n, v["value"], v["se"]) for n, v in own["unknowns"].items()
-                if n.split("/")[-1].split(".")[0] == effect]
+                if effect_of(n) == effect]
         parts.append(f"{effect} ({', '.join(mine)})")
     statement = own.get("statement") or ""
     other_base = statement[statement.find(OTHER_BASE):].split(" [base:")[0] if OTHER_BASE in statement else ""

@@ -155,7 +155,7 @@ def _runs(value, path, fail):
 
 
 def _own_effects(value, path, fail):
-    from ...models.effects import CATALOG
+    from ...models.effects import CATALOG, effect_of
 
     effects = _member(value, "effects", path, fail)
     if not isinstance(effects, list) or any(e not in CATALOG for e in effects):
@@ -165,13 +165,13 @@ def _own_effects(value, path, fail):
         fail(f"{path}.unknowns", 'expected an object {"effect.unknown": {"value": ..., "se": ...}}', _show(unknowns))
     for name, v in unknowns.items():
         p = f"{path}.unknowns.{name}"
-        if name.split("/")[-1].split(".")[0] not in effects:
+        if effect_of(name) not in effects:
             fail(p, f"expected an unknown of one of the effects {effects}", _show(name))
         if not isinstance(v, dict):
             fail(p, 'expected an object {"value": ..., "se": ...}', _show(v))
         _check(Key("number", nulls=NONE), _member(v, "value", p, fail), f"{p}.value", fail)
         _check(Key("number", low=0.0), _member(v, "se", p, fail), f"{p}.se", fail)
-    if not all(any(n.split("/")[-1].split(".")[0] == e for n in unknowns) for e in effects):
+    if not all(any(effect_of(n) == e for n in unknowns) for e in effects):
         fail(f"{path}.unknowns", f"expected the unknowns of every effect {effects}", _show(sorted(unknowns)))
     _check(Key("string", choices=("knots", "random_walk")), _member(value, "navigation", path, fail),
            f"{path}.navigation", fail)

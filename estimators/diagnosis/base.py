@@ -43,11 +43,6 @@ PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
 VCE_ITERATIONS = 3
 
 
-def effect_of(unknown: str) -> str:
-    """The catalog effect an effect unknown belongs to (``run2/moving_bed.velocity_north_m_s`` -> ``moving_bed``)."""
-    return unknown.split("/")[-1].split(".")[0]
-
-
 def group_sigma(model: GapModel, raw: np.ndarray) -> dict:
     out = {}
     for i, key in enumerate(model.sigma_keys):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...models.effects import CATALOG, get_effect
+from ...models.effects import CATALOG, effect_of, get_effect
 from ...solvers.multistart import SolverOptions
 from ..calibration.config import ATTITUDES
 from ..run_setup import NAVIGATION_CHOICES
@@ -92,7 +92,7 @@ class DiagnosisConfig:
     def __post_init__(self):
         for name in self.effects + self.given:
             get_effect(name)
-        held = {str(n).split("/")[-1].split(".")[0] for n, *_ in self.given_values}
+        held = {effect_of(str(n)) for n, *_ in self.given_values}
         if held and held != set(self.given):
             raise ValueError(f"given_values: expected the unknowns of every given effect {sorted(self.given)}, "
                              f"got those of {sorted(held)}")

@@ -27,10 +27,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...cases.case import Case
+from ...models.effects import effect_of
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ..calibration.record import CalibrationRecord
 from . import where as where_mod
-from .base import (applicable, effect_of, effect_terms, fit_base, group_sigma, noise_from_data, pinned_effect_parameters,
+from .base import (applicable, effect_terms, fit_base, group_sigma, noise_from_data, pinned_effect_parameters,
                    variance_components, velocity_error)
 from .config import DiagnosisConfig, holding
 from .covariance import coloured_covariance
@@ -128,38 +129,36 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     profile_hints = {}  # a velocity scale's maximum and SE from its last profile
 
     def refit(selected_terms, name, start_fit, moved=False):
-        """``name`` refitted on top of ``selected_terms``; ``moved``: a held given effect freed from its values."""
+        """``name`` refitted on top of ``selected_terms``; ``moved``: a held given effect freed from its values
+        (its terms already among them), started also from its fresh start."""
         terms = list(selected_terms) if moved else selected_terms + effect_terms(base, name)
-        base_now = released(base, name) if moved else base
-        return _refit(base_now, terms, name, start_fit)
-
-    def _refit(base, terms, name, start_fit):
+        at = released(base, name) if moved else base  # the base this refit's models are built on
         values = start_fit.values
-        held_delay = any(n.endswith(REFERENCE_DELAY) for n in base.held)  # the runs' own, where it is held
+        held_delay = any(n.endswith(REFERENCE_DELAY) for n in at.held)  # the runs' own, where it is held
         if base_model.random_walk and any(t.effect.name == "reference_latency" for t in terms) and not held_delay:
-            return delay_profile(base, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
-        model = GapModel(base, terms, peaks, solver=config.solver)
-        pinned = pinned_effect_parameters(model, base)
+            return delay_profile(at, terms, peaks, config, values, start_fit.sigma, profile=name == "reference_latency")
+        model = GapModel(at, terms, peaks, solver=config.solver)
+        pinned = pinned_effect_parameters(model, at)
         if base_model.random_walk:  # unknowns that scale the velocities: by the marginal likelihood, held where it put them
             scaled = [n for n in model.names if n.endswith(VELOCITY_SCALES)]
             mine = [n for n in scaled if effect_of(n) == name]
             pinned.update({n: float(values[n]) for n in scaled if n not in mine and n in values})
-            if len(mine) == 1 and mine[0] not in base.held:  # started about an earlier round's maximum, where there is one
+            if len(mine) == 1 and mine[0] not in at.held:  # started about an earlier round's maximum, where there is one
                 model, fit = marginal_profile(model, mine[0], values, start_fit.sigma, pinned, config, terms, peaks,
                                                profile_hints.get(mine[0]))
                 if np.isfinite(fit.profile_se[mine[0]]):
                     profile_hints[mine[0]] = (float(fit.x[model.names.index(mine[0])]), fit.profile_se[mine[0]])
                 return model, fit
-        extra = [o for t in effect_terms(base, name) for o in t.effect.extra_starts()]
+        extra = [o for t in effect_terms(at, name) for o in t.effect.extra_starts()]
         starts = [model.start(values)] + [model.start(values, _renamed(model, o)) for o in extra]
-        if name in config.given and name not in {effect_of(n) for n in base.held}:  # moved: also from its own fresh start
+        if moved:
             starts.append(model.start({k: v for k, v in values.items() if not (k in model.effect_names and effect_of(k) == name)}))
         best = None
         for x0 in starts:
             f = model.solve(x0, start_fit.sigma, fixed=pinned)
             if best is None or f.objective < best.objective:
                 best = f
-        return fixed_points(base, terms, peaks, config, model, best, pinned)
+        return fixed_points(at, terms, peaks, config, model, best, pinned)
 
     # round 1: every candidate against the base (the ranking); later rounds: on top of the chosen ones
     noise = dict(sigma_fit)

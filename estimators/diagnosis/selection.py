@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from ...models.effects import get_effect
-from .base import effect_of, velocity_error
+from ...models.effects import effect_of, get_effect
+from .base import velocity_error
 from .config import DiagnosisConfig
 from .covariance import covariance, detection_limits, hac_standard_errors, standard_errors
 from .heldout import colour_factor, heldout_gap, heldout_improvement_z

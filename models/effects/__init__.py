@@ -34,4 +34,9 @@ def get_effect(name: str) -> Effect:
     return CATALOG[name]
 
 
-__all__ = ["CATALOG", "Effect", "Parameter", "get_effect"]
+def effect_of(unknown: str) -> str:
+    """The catalog effect an effect unknown belongs to (``run2/moving_bed.velocity_north_m_s`` -> ``moving_bed``)."""
+    return unknown.split("/")[-1].split(".")[0]
+
+
+__all__ = ["CATALOG", "Effect", "Parameter", "effect_of", "get_effect"]
