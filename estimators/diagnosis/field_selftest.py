@@ -8,7 +8,6 @@ every run (one compass, one clock, one bed), diagnosed with the survey's calibra
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
@@ -16,7 +15,7 @@ import numpy as np
 from ...cases.case import Case
 from ..calibration.record import CalibrationRecord
 from .config import DiagnosisConfig, holding
-from .diagnose import diagnose
+from .diagnose import calibration_own_effects, diagnose
 from ..run_setup import has_moving_reference
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey
 from .own_effects import find_own_effects
@@ -43,20 +42,20 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
     tic = time.perf_counter()
-    first = diagnose(case, dataclasses.replace(config, hold_own_effects=False), calibration=calibration)
-    recorded = getattr(calibration, "own_effects", None)
-    own = recorded if recorded and recorded["navigation"] == first.base["navigation"] else \
-        find_own_effects(case, calibration, config, first=first)
+    first = diagnose(case, config, calibration=calibration)  # the calibration's own effects held, where they apply
+    first_s = time.perf_counter() - tic
+    recorded = calibration_own_effects(calibration, runs, config, first.fits["base"][0].base)
+    own = recorded or find_own_effects(case, calibration, config, first=first)
     held = holding(config, own) if own["effects"] else config
     rows, limits, beyond, reasons = [], {}, {}, {}
     for error, size in trials:
         run = case if error == "clean" else inject_survey(runs, error, size)
-        if error != "clean" or own["effects"]:
+        if error == "clean" and (recorded or not own["effects"]):  # the first diagnosis is the clean run's, as held
+            r, seconds = first, first_s
+        else:
             tic = time.perf_counter()
             r = diagnose(run, held, calibration=calibration)
-        else:
-            r = first
-        seconds = time.perf_counter() - tic  # one diagnosis, what a user waits for (not the own effects' rounds)
+            seconds = time.perf_counter() - tic  # one diagnosis, what a user waits for (not the own effects' rounds)
         expected = "none" if error == "clean" else FIELD_ERRORS[error][0]
         mine = next((s for s in r.ranking if s["effect"] == expected and s["round"] == 1), None)
         row = {"error": error, "size": size, "unit": FIELD_ERRORS[error][1] if error != "clean" else "",
