@@ -195,14 +195,26 @@ class GapModel:
 
         x = model.x
         self._z = z = ca.MX.sym("z", x.shape[0])
+        self._x_of_z = self._calibrated_constants(z)
         self._w = ca.MX.sym("w", model.raw.shape[0])
         self._groups = {}  # (first, end) part -> residuals and Jacobian of parts a model at another reference shift shares
         self.solver_options = solver or SolverOptions(tol=1e-8, max_iter=300, hessian="gauss-newton", expand=False)
         self.lbg, self.ubg = model.lbg, model.ubg
         self._assemble()
         # the fitted navigation per run (corrected velocities, where-regressors)
-        self._nav = [None if V is None else ca.Function("nav", [z], [ca.substitute([V], [x], [self.scale * z])[0]])
+        self._nav = [None if V is None else ca.Function("nav", [z], [ca.substitute([V], [x], [self._x_of_z])[0]])
                      for V in model.knot_syms]
+
+    def _calibrated_constants(self, z: ca.MX) -> ca.MX:
+        """x(z): scale * z, with the calibration's pinned quantities and the held effect unknowns as
+        constants. Their columns of the residual Jacobian are then structurally zero (they are never
+        free), so its colouring needs a direction per free shared unknown only: a 2995-ping transect's
+        candidate Jacobian took 13 forward directions through the bottom-track rows, 9 of them for pins."""
+        pinned = np.zeros(len(self.names), dtype=bool)
+        pinned[[self.names.index(n) for n in [*self.base.pins.values, *self.base.held] if n in self.names]] = True
+        free = np.flatnonzero(~pinned)
+        S = ca.DM(ca.Sparsity.triplet(len(self.names), len(self.names), free.tolist(), free.tolist()), self.scale[free])
+        return ca.mtimes(S, z) + ca.DM(np.where(pinned, self.lbx, 0.0))
 
     def _assemble(self):
         """The NLP over z, its residual Functions and solver. The residuals are differentiated in groups
@@ -217,7 +229,7 @@ class GapModel:
             group = list(group)  # a run's reference channels, or a stretch between them
             a, b = group[0], group[-1] + 1
             if shifts or (a, b) not in self._groups:
-                parts = ca.substitute(model.raw_parts[a:b], [model.x], [self.scale * z])
+                parts = ca.substitute(model.raw_parts[a:b], [model.x], [self._x_of_z])
                 r = ca.vertcat(*parts)
                 entry = (r, ca.jacobian(w[int(offsets[a]):int(offsets[b])] * r, z))
                 if not shifts:
@@ -230,7 +242,7 @@ class GapModel:
         e_z = w * raw_z
         self.residual_fun = ca.Function("residuals", [z, w], [e_z, raw_z, J_z])
         self.jacobian_fun = ca.Function("residual_jacobian", [z, w], [J_z])
-        g_z = ca.substitute([model.g], [model.x], [self.scale * z])[0]
+        g_z = ca.substitute([model.g], [model.x], [self._x_of_z])[0]
         self.nlp = {"x": z, "p": w, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
         self.solver = build_solver(self.nlp, self.solver_options, "diagnosis", residuals=self.jacobian_fun,
                                    residual_fun=ca.Function("weighted_residuals", [z, w], [e_z]))
@@ -326,13 +338,10 @@ class GapModel:
         sl = self.channel_slices()
         prefix = "" if self.n_runs == 1 else f"{rs.case.name}/"
         miss = -np.column_stack([fit.raw[sl[f"{prefix}bt_beam{i + 1}"]] for i in range(4)])
-        D = self._dradial_dv(fit, run)
         ok = np.isfinite(rs.case.pings.bt_radial_m_s)
-        for k in range(t.size):
-            if ok[k].sum() >= 3:
-                v[k] += np.linalg.lstsq(D[k][ok[k]], miss[k][ok[k]], rcond=None)[0]
-            else:
-                v[k] = np.nan
+        D = np.where(ok[:, :, None], self._dradial_dv(fit, run), 0.0)  # a missing beam: a zero row, no say
+        v += np.einsum("nib,nb->ni", np.linalg.pinv(D), np.where(ok, miss, 0.0))  # each ping's least squares at once
+        v[ok.sum(axis=1) < 3] = np.nan
         return v
 
     def _beam_directions(self, fit: Fit, run: int) -> np.ndarray:
