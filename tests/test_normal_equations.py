@@ -87,7 +87,8 @@ def test_banded_selected_inversion_equals_the_dense_inverse():
     """Velocities per ping (each row on one or two neighbouring knots) plus global unknowns: the
     leverages by the band of B^-1 and a Schur complement equal diag(J A^-1 J^T) computed densely,
     and a wide band falls back to the solves."""
-    from adcpdyn.estimators.statistics.normal_equations import arrow_leverages, band_of_inverse, leverages, ridged
+    from adcpdyn.estimators.statistics.normal_equations import (MAX_SYMBOLIC_BAND, arrow_leverages, band_of_inverse,
+                                                                leverages, ridged)
     from scipy.linalg import cholesky_banded
 
     rng = np.random.default_rng(3)
@@ -106,12 +107,12 @@ def test_banded_selected_inversion_equals_the_dense_inverse():
     np.testing.assert_allclose(leverages(A, J, local), dense, rtol=1e-8, atol=1e-12)
     np.testing.assert_allclose(leverages(A, J), dense, rtol=1e-8, atol=1e-12)
     B = Ad[:3 * knots, :3 * knots]
-    p = 5
-    ab = np.array([np.concatenate([np.diag(B, -d), np.zeros(d)]) for d in range(p + 1)])
-    zb = band_of_inverse(cholesky_banded(ab, lower=True))
     Binv = np.linalg.inv(B)
-    for d in range(p + 1):
-        np.testing.assert_allclose(zb[d, :3 * knots - d], np.diag(Binv, -d), rtol=1e-8, atol=1e-12)
+    for p in (5, MAX_SYMBOLIC_BAND + 4):  # the recurrence as a CasADi mapaccum, and stepped in numpy past its band
+        ab = np.array([np.concatenate([np.diag(B, -d), np.zeros(d)]) for d in range(p + 1)])  # B's band is 5 wide
+        zb = band_of_inverse(cholesky_banded(ab, lower=True))
+        for d in range(p + 1):
+            np.testing.assert_allclose(zb[d, :3 * knots - d], np.diag(Binv, -d), rtol=1e-8, atol=1e-12)
     assert arrow_leverages(A, J, np.ones(J.shape[1], dtype=bool)) is None  # the globals make the band wide
 
 
