@@ -341,12 +341,56 @@ class RowJacobian:
             G[np.ix_(sc, sc)] += ds_b.T @ M @ ds_b
             if grad is not None:
                 grad[sc] += ds_b.T @ g
-        if knotted:
-            Gk, gk = self._accumulate(self._parts(z, w, only=knotted), e)
-            G += Gk
-            if grad is not None:
-                grad += gk
+        for index in knotted:
+            self._knotted_sums(index, z, w, s, ds_dz, e, G, grad)
         return G, grad
+
+    def _knotted_sums(self, index: int, z, w: np.ndarray, s: np.ndarray, ds_dz, e, G: np.ndarray, grad) -> None:
+        """Add a block with knots to J^T J (and J^T e) in place. Its knot part is never formed: row (i, j)
+        (output i, ping j) has d/dV[K, a] = jw[i, j, a] H[j, K] scale[K, a], with jw the weighted, signed
+        per-row Jacobian in the velocity and H the velocity basis, so the knot-knot part is, per axis pair,
+        H^T diag(sum_i jw_a jw_b) H, and the knot-shared part H^T (sum_i jw_a shared_i): sparse products
+        of H (n x K), where the (k n, n_z) knot part (10^5 pings: 2.4e6 entries) cost a CSR build and two
+        sparse products at every evaluation."""
+        b = self.blocks[index]
+        k, n = b.fun.size1_out(0), b.data.shape[1]
+        sc, knots, H, Ht = self._cols[index], self._knots[index], *self._basis(index)
+        scale = self.knot_scale[knots]  # (K, 3)
+        jv, js = self._evaluate(index, H @ (np.asarray(z, dtype=float).ravel()[knots] * scale), s[self._index[index]])
+        sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
+        rows = slice(b.offset, b.offset + k * n)
+        a = w[rows].reshape(k, n) * sign[:, None]  # (k, n): output i of ping j weighted and signed
+        ds_b = ds_dz[self._index[index]][:, sc].toarray()
+        shared = self._scratch(index, (k * n, sc.size))
+        for i in range(k):
+            np.matmul(js[:, i], ds_b * sign[i], out=shared[i * n:(i + 1) * n])
+        shared *= w[rows][:, None]
+        G[np.ix_(sc, sc)] += shared.T @ shared
+        jw = jv.transpose(1, 0, 2) * a[:, :, None]  # (k, n, 3)
+        by_ping = shared.reshape(k, n, sc.size)
+        er = None if grad is None else np.asarray(e[rows]).reshape(k, n)
+        if grad is not None:
+            grad[sc] += shared.T @ np.asarray(e[rows])
+        for p in range(3):
+            cross = scale[:, p, None] * (Ht @ np.einsum("in,inc->nc", jw[:, :, p], by_ping))  # (K, len(sc))
+            G[np.ix_(knots[:, p], sc)] += cross
+            G[np.ix_(sc, knots[:, p])] += cross.T
+            for q in range(p, 3):
+                d = np.einsum("in,in->n", jw[:, :, p], jw[:, :, q])
+                block = (Ht @ H.multiply(d[:, None]).tocsc()).toarray() * np.outer(scale[:, p], scale[:, q])
+                G[np.ix_(knots[:, p], knots[:, q])] += block
+                if q != p:
+                    G[np.ix_(knots[:, q], knots[:, p])] += block.T
+            if grad is not None:
+                grad[knots[:, p]] += scale[:, p] * (Ht @ np.einsum("in,in->n", jw[:, :, p], er))
+
+    def _basis(self, index: int) -> tuple:
+        """Block ``index``'s velocity basis H (n, K) as CSR and its transpose as CSR, kept."""
+        cache = self.__dict__.setdefault("_bases", {})
+        if index not in cache:
+            H = sp.csr_matrix(self.blocks[index].velocity_basis)
+            cache[index] = (H, sp.csr_matrix(H.T))
+        return cache[index]
 
     def matmul(self, z, w, M) -> np.ndarray:
         """J @ M (n_rows, q) for M (n_z, q), J never formed: a block without knots maps M through its
