@@ -209,7 +209,8 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--compile", default="auto", choices=["auto", "always", "never"],
                        help="the assembled problem's per-ping model as machine code from the per-machine cache "
                             "(`adcpdyn cache`; built by the C compiler the first time, same numbers): auto when the runs "
-                            "hold 500 pings or more together (the Jacobian then assembled), always "
+                            "hold 500 pings or more together (the Jacobian then assembled) or their Jacobian is assembled anyway "
+                            "(a large expanded graph), always "
                             "(with --jacobian assembled) or never")
         s.add_argument("--navigation", default="knots", choices=["knots", "random_walk", "auto"],
                        help="the vessel's velocity: knots (piecewise-linear), random_walk (a velocity at every ping, "

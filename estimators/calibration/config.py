@@ -123,8 +123,8 @@ class CalibrationConfig:
         Jacobians) as machine code from the per-machine cache (:mod:`~adcpdyn.solvers.compiled`,
         built by the system C compiler the first time; the same numbers as interpreted):
         ``auto`` for problems of at least ``COMPILE_MIN_PINGS`` pings (all runs; the Jacobian then
-        assembled unless ``jacobian='symbolic'``, which compiles nothing), ``always`` (needs
-        ``jacobian='assembled'``) or ``never``.
+        assembled unless ``jacobian='symbolic'``, which compiles nothing) and for shorter ones whose
+        Jacobian ``auto`` assembles, ``always`` (needs ``jacobian='assembled'``) or ``never``.
     own_effects : str
         ``auto``: one run whose beams take the sensor's samples (a real file) is then diagnosed on
         top of the calibration and what it shows is kept with it (CALIB.json ``own_effects``), so a

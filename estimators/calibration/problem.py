@@ -60,7 +60,10 @@ ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is
 # pings (all runs) from which --compile auto compiles the per-ping models (and so assembles the Jacobian): 8 starts
 # warm, 501 pool_m0 pings 2.1 -> 0.8 s, deep_ship (601) 30.7 -> 9.4 s; winriver02 (830, 24 starts) 19.4 -> 6.3 s,
 # 10.9 s with an empty cache (its six models compiled once per machine); below, winriver01 (261) gains 15.8 -> 10.1 s
-# but RiverPro (272, 171 unknowns) loses 2.5 -> 2.9 s, and unit-sized runs would pay the compiler first
+# but RiverPro (272, 171 unknowns) loses 2.5 -> 2.9 s, and unit-sized runs would pay the compiler first. A shorter
+# problem is compiled too where it is assembled (ASSEMBLED_MIN_NODES), since the assembled path evaluates its per-row
+# Jacobians interpreted at about 130 us a ping: winriver01 (261 pings, 406002 nodes, 24 starts, solved twice for the
+# moving-bed test) 30.9 s interpreted, 7.8 s compiled (27.5 s compiling into an empty cache); symbolic 34.8 s
 COMPILE_MIN_PINGS = 500
 # the noise levels are re-estimated from the fit, each time with a refit, until none moves by more than VCE_RTOL
 # (their fixed point: one step left winriver01's reference level 35 % above it and its yaw SE 1.47 deg, 1.13 at
@@ -188,6 +191,9 @@ class CalibrationProblem:
         compile_min = {"always": 0, "never": None}.get(config.compile, COMPILE_MIN_PINGS)
         symbolic = config.jacobian == "symbolic"  # compiled models are not expanded to SX
         self.model = model = SurveyModel(runs, spec, compile_min_pings=None if symbolic else compile_min)
+        if config.compile == "auto" and config.jacobian == "auto" and not model.compiled and \
+                model.assembled_nodes > ASSEMBLED_MIN_NODES:  # assembled anyway: its per-row Jacobians compiled
+            self.model = model = SurveyModel(runs, spec, compile_min_pings=0)
         u = model.unknowns
         self.names, self.scale, self.lbx, self.ubx = list(u.names), u.scale, u.lower, u.upper
         # single-run views (tests, benchmarks, the CLI print)
