@@ -26,6 +26,7 @@ from ..solvers.ping_map import CHUNK
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
+DENSE_BASIS_ENTRIES = 500_000  # a block's velocity basis (pings x knots) up to this size is summed through dense
 GRAM_ROWS = 1024  # rows a weighted per-row Jacobian chunk holds in the Gram sum (a few MB: stays in cache)
 
 
@@ -377,7 +378,8 @@ class RowJacobian:
             G[np.ix_(sc, knots[:, p])] += cross.T
             for q in range(p, 3):
                 d = np.einsum("in,in->n", jw[:, :, p], jw[:, :, q])
-                block = (Ht @ H.multiply(d[:, None]).tocsc()).toarray() * np.outer(scale[:, p], scale[:, q])
+                block = _dense(Ht @ (H.multiply(d[:, None]).tocsc() if sp.issparse(H) else H * d[:, None]))
+                block *= np.outer(scale[:, p], scale[:, q])
                 G[np.ix_(knots[:, p], knots[:, q])] += block
                 if q != p:
                     G[np.ix_(knots[:, q], knots[:, p])] += block.T
@@ -385,11 +387,16 @@ class RowJacobian:
                 grad[knots[:, p]] += scale[:, p] * (Ht @ np.einsum("in,in->n", jw[:, :, p], er))
 
     def _basis(self, index: int) -> tuple:
-        """Block ``index``'s velocity basis H (n, K) as CSR and its transpose as CSR, kept."""
+        """Block ``index``'s velocity basis H (n, K) and its transpose, kept: dense where small (a survey's
+        500-ping transects: scipy's per-call cost would outweigh the products), else CSR."""
         cache = self.__dict__.setdefault("_bases", {})
         if index not in cache:
             H = sp.csr_matrix(self.blocks[index].velocity_basis)
-            cache[index] = (H, sp.csr_matrix(H.T))
+            if H.shape[0] * H.shape[1] <= DENSE_BASIS_ENTRIES:
+                H = H.toarray()
+                cache[index] = (H, np.ascontiguousarray(H.T))
+            else:
+                cache[index] = (H, sp.csr_matrix(H.T))
         return cache[index]
 
     def matmul(self, z, w, M) -> np.ndarray:
@@ -455,6 +462,10 @@ class RowJacobian:
                 if grad is not None:
                     grad[kc] += kp.T @ e[r[0]:r[-1] + 1]
         return G, grad
+
+
+def _dense(M) -> np.ndarray:
+    return M.toarray() if sp.issparse(M) else np.asarray(M)
 
 
 class JacobianAt:
