@@ -212,6 +212,7 @@ class GapModel:
         candidate Jacobian took 13 forward directions through the bottom-track rows, 9 of them for pins."""
         pinned = np.zeros(len(self.names), dtype=bool)
         pinned[[self.names.index(n) for n in [*self.base.pins.values, *self.base.held] if n in self.names]] = True
+        self._constant = pinned
         free = np.flatnonzero(~pinned)
         S = ca.DM(ca.Sparsity.triplet(len(self.names), len(self.names), free.tolist(), free.tolist()), self.scale[free])
         return ca.mtimes(S, z) + ca.DM(np.where(pinned, self.lbx, 0.0))
@@ -298,6 +299,8 @@ class GapModel:
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
         for name, value in (fixed or {}).items():
             i = self.names.index(name)
+            if self._constant[i] and not np.isclose(value, self.lbx[i], rtol=1e-12, atol=1e-12):
+                raise ValueError(f"fixed: {name} is held at {self.lbx[i]:.6g} in this model's graph, got {value:.6g}")
             lbz[i] = ubz[i] = value / self.scale[i]
             x0s[:, i] = value
         w = self.weights(sigma)
