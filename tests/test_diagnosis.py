@@ -716,3 +716,31 @@ def test_a_calibrations_own_effects_are_held_on_its_own_runs_only():
     assert later.selected[0] == "attitude_latency"
     moved = next(s for s in later.ranking if s["effect"] == "attitude_latency" and s["significant"])
     assert moved["params"]["attitude_latency.delay_s"] - value == pytest.approx(0.5, abs=0.1)
+
+
+def test_pinned_quantities_are_constants_of_the_models_graph():
+    """A calibration's pinned quantity enters the diagnosis model as a constant: the residuals are those of
+    the model with it free at the same value, its Jacobian column is structurally empty (the colouring then
+    spends no direction on it) and every other column is the free model's; fixing it at another value is
+    refused in one line rather than moving only its bounds."""
+    from adcpdyn.estimators.diagnosis.base import base_from
+    from adcpdyn.estimators.diagnosis.model import GapModel, Pins
+
+    case = simulate(short_scenario(20.0), seed=4)
+    config = DiagnosisConfig(navigation="random_walk")
+    free_base = base_from([case], config)
+    name = next(n for n in ("P_x", "P_y", "P_z") if n in GapModel(free_base, solver=config.solver).names)
+    pinned_base = dataclasses.replace(free_base, pins=Pins({**free_base.pins.values, name: 0.3}, "test"))
+    free, pinned = (GapModel(b, solver=config.solver) for b in (free_base, pinned_base))
+    rng = np.random.default_rng(2)
+    x = free.start({n: 0.05 * rng.normal() for n in free.names}, {name: 0.3})
+    w = free.weights({k: 0.05 for k in free.sigma_keys})
+    a, b = (m.residual_fun(x / m.scale, w) for m in (free, pinned))
+    np.testing.assert_allclose(np.asarray(a[1]), np.asarray(b[1]), rtol=1e-12, atol=1e-12)
+    j = free.names.index(name)
+    assert ca.DM(b[2])[:, j].nnz() == 0 and ca.DM(a[2])[:, j].nnz() > 0
+    rest = [i for i in range(len(free.names)) if i != j]
+    np.testing.assert_allclose(np.asarray(ca.densify(b[2]))[:, rest], np.asarray(ca.densify(a[2]))[:, rest],
+                               rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match=f"fixed: {name} is held at 0.3 in this model's graph, got 0.5"):
+        pinned.solve(x[None, :], {k: 0.05 for k in pinned.sigma_keys}, fixed={name: 0.5})
