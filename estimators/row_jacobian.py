@@ -111,6 +111,7 @@ class RowJacobian:
         self._data = [np.ascontiguousarray(b.data.T) for b in blocks]  # (n, n_d): CasADi's column-major (n_d, n)
         self._pool = _pool(threads) if threads > 1 else None
         self._local = threading.local()  # evaluation buffers are per thread (multistart solves in threads)
+        self._bases = {}  # block -> its velocity basis and transpose for the Gram sums (:meth:`_basis`)
 
     @property
     def max_knot_columns(self) -> int:
@@ -262,40 +263,48 @@ class RowJacobian:
         for index, b in enumerate(self.blocks):
             if only is not None and index not in only:
                 continue
-            k, n = b.fun.size1_out(0), b.data.shape[1]
-            sc, knot_columns = self._cols[index], self._knots[index]
-            v = np.zeros((n, 3))  # (n, 3): CasADi's column-major (3, n)
+            k, n, rows, sc, a, ds_b = self._block(index, w, ds_dz)
             entries = self._knot_index(index)
-            if entries is not None:
-                knots = np.asarray(z, dtype=float).ravel()[knot_columns] * self.knot_scale[knot_columns]
-                v = b.velocity_basis @ knots
-            jv, js = self._evaluate(index, v, s[self._index[index]])
-            sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
-            r = b.offset + np.arange(k * n)
-            wr = w[r]
-            ds_b = ds_dz[self._index[index]][:, sc].toarray()  # (ns_b, len(sc))
-            shared = self._scratch(index, (k * n, sc.size))
-            for i in range(k):  # js[:, i] is a strided (n, ns) matrix BLAS takes as it is
-                np.matmul(js[:, i], ds_b * sign[i], out=shared[i * n:(i + 1) * n])
-            shared *= wr[:, None]
+            jv, js = self._evaluate(index, self._velocity(index, z), s[self._index[index]])
+            shared = self._shared_part(index, js, a, ds_b)
             knot_part = None
             if entries is not None:
-                rows, cols, H = entries
-                jv = jv.transpose(1, 0, 2) * sign[:, None, None]  # (k, n, 3)
-                vals = np.concatenate([jv[i, H.row, a] * H.data for i in range(k) for a in range(3)])
-                knot_part = sp.csr_matrix((vals * self.knot_scale[cols] * wr[rows], (rows, cols)), shape=(k * n, self.n_z))
-            yield r, sc, shared, knot_part
+                knot_rows, cols, H = entries
+                jw = jv.transpose(1, 0, 2) * a.T[:, :, None]  # (k, n, 3): weighted and signed
+                vals = np.concatenate([jw[i, H.row, ax] * H.data for i in range(k) for ax in range(3)])
+                knot_part = sp.csr_matrix((vals * self.knot_scale[cols], (knot_rows, cols)), shape=(k * n, self.n_z))
+            yield np.arange(rows.start, rows.stop), sc, shared, knot_part
+
+    def _velocity(self, index: int, z) -> np.ndarray:
+        """Block ``index``'s velocity at its rows, (n, 3) (CasADi's column-major (3, n)): the knots through its
+        velocity basis, zero without knots."""
+        if not self._has_knots(index):
+            return np.zeros((self.blocks[index].data.shape[1], 3))
+        knots = self._knots[index]
+        return self.blocks[index].velocity_basis @ (np.asarray(z, dtype=float).ravel()[knots] * self.knot_scale[knots])
+
+    def _shared_part(self, index: int, js: np.ndarray, a: np.ndarray, ds_b: np.ndarray) -> np.ndarray:
+        """Block ``index``'s weighted part of J on its shared columns, (k n, len(sc)) output-major, from its per-row
+        Jacobians in s ``js`` (n, k, ns), the weights times signs ``a`` (n, k) and ds/dz ``ds_b``: this thread's
+        scratch array, valid until the next call."""
+        n, k = a.shape
+        shared = self._scratch(index, (k * n, ds_b.shape[1]))
+        for i in range(k):  # js[:, i] is a strided (n, ns) matrix BLAS takes as it is
+            out = shared[i * n:(i + 1) * n]
+            np.matmul(js[:, i], ds_b, out=out)
+            out *= a[:, i, None]
+        return shared
 
     def __call__(self, z, w) -> sp.csr_matrix:
         return self._stack([(r[0], shared, sc, knot_part) for r, sc, shared, knot_part in self._parts(z, w)])
 
     def gram(self, z, w) -> np.ndarray:
         """J^T J (n_z, n_z) dense, block by block, without forming J: the shared columns'
-        part by a dense product, the knots' by sparse ones (knot and shared columns are disjoint)."""
+        part by a dense product, the knots' through the velocity basis (knot and shared columns are disjoint)."""
         return self.gram_and_gradient(z, w)[0]
 
-    def _unknotted(self, index: int, w: np.ndarray, ds_dz) -> tuple:
-        """A block without knots as :meth:`gram_and_gradient` and :meth:`matmul` take it: (k outputs, n rows,
+    def _block(self, index: int, w: np.ndarray, ds_dz) -> tuple:
+        """A block as the passes over J take it: (k outputs, n rows,
         its slice of J's rows, its shared columns sc, the weights w times the outputs' signs as (n, k), and
         ds/dz of its share of s on columns sc, dense)."""
         b = self.blocks[index]
@@ -318,10 +327,10 @@ class RowJacobian:
         s, ds_dz = self._shared_at(z)
         knotted = []
         for index in range(len(self.blocks)):
-            if self._has_knots(index):  # the J path below, which builds the knot entries once
+            if self._has_knots(index):  # summed through the velocity basis below
                 knotted.append(index)
                 continue
-            k, n, rows, sc, a, ds_b = self._unknotted(index, w, ds_dz)
+            k, n, rows, sc, a, ds_b = self._block(index, w, ds_dz)
             parts, (_, js) = self._prepare(index, np.zeros((n, 3)), s[self._index[index]])
             ea = None if e is None else np.asarray(e[rows]).reshape(k, n).T
             ns = js.shape[2]
@@ -353,21 +362,13 @@ class RowJacobian:
         H^T diag(sum_i jw_a jw_b) H, and the knot-shared part H^T (sum_i jw_a shared_i): sparse products
         of H (n x K), where the (k n, n_z) knot part (10^5 pings: 2.4e6 entries) cost a CSR build and two
         sparse products at every evaluation."""
-        b = self.blocks[index]
-        k, n = b.fun.size1_out(0), b.data.shape[1]
-        sc, knots, H, Ht = self._cols[index], self._knots[index], *self._basis(index)
+        k, n, rows, sc, a, ds_b = self._block(index, w, ds_dz)
+        knots, (H, Ht) = self._knots[index], self._basis(index)
         scale = self.knot_scale[knots]  # (K, 3)
-        jv, js = self._evaluate(index, H @ (np.asarray(z, dtype=float).ravel()[knots] * scale), s[self._index[index]])
-        sign = np.ones(k) if b.sign is None else np.asarray(b.sign, dtype=float)
-        rows = slice(b.offset, b.offset + k * n)
-        a = w[rows].reshape(k, n) * sign[:, None]  # (k, n): output i of ping j weighted and signed
-        ds_b = ds_dz[self._index[index]][:, sc].toarray()
-        shared = self._scratch(index, (k * n, sc.size))
-        for i in range(k):
-            np.matmul(js[:, i], ds_b * sign[i], out=shared[i * n:(i + 1) * n])
-        shared *= w[rows][:, None]
+        jv, js = self._evaluate(index, self._velocity(index, z), s[self._index[index]])
+        shared = self._shared_part(index, js, a, ds_b)
         G[np.ix_(sc, sc)] += shared.T @ shared
-        jw = jv.transpose(1, 0, 2) * a[:, :, None]  # (k, n, 3)
+        jw = jv.transpose(1, 0, 2) * a.T[:, :, None]  # (k, n, 3): weighted and signed
         by_ping = shared.reshape(k, n, sc.size)
         er = None if grad is None else np.asarray(e[rows]).reshape(k, n)
         if grad is not None:
@@ -389,7 +390,7 @@ class RowJacobian:
     def _basis(self, index: int) -> tuple:
         """Block ``index``'s velocity basis H (n, K) and its transpose, kept: dense where small (a survey's
         500-ping transects: scipy's per-call cost would outweigh the products), else CSR."""
-        cache = self.__dict__.setdefault("_bases", {})
+        cache = self._bases
         if index not in cache:
             H = sp.csr_matrix(self.blocks[index].velocity_basis)
             if H.shape[0] * H.shape[1] <= DENSE_BASIS_ENTRIES:
@@ -413,7 +414,7 @@ class RowJacobian:
             if self._has_knots(index):
                 knotted.append(index)
                 continue
-            k, n, rows, sc, a, ds_b = self._unknotted(index, w, ds_dz)
+            k, n, rows, sc, a, ds_b = self._block(index, w, ds_dz)
             _, js = self._evaluate(index, np.zeros((n, 3)), s[self._index[index]])
             jb = (js.reshape(n * k, -1) @ (ds_b @ M2[sc])).reshape(n, k, -1)  # one product; rows ping-major
             jb *= a[:, :, None]
