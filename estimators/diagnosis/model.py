@@ -173,13 +173,14 @@ class GapModel:
         u = model.unknowns
         self.names, self.scale = list(u.names), u.scale
         self.lbx, self.ubx = u.lower, u.upper
-        for name, value in base.pins.values.items():  # calibrated quantities: held where the calibration put them
+        # calibrated quantities where the calibration put them, the runs' own effects where this model carries them:
+        # held, constants of the graph (:meth:`_calibrated_constants`)
+        held = {**base.pins.values, **{n: v for n, v in base.held.items() if n in self.names}}
+        self._constant = np.zeros(len(self.names), dtype=bool)
+        for name, value in held.items():
             i = self.names.index(name)
             self.lbx[i] = self.ubx[i] = value
-        for name, value in base.held.items():  # the runs' own effects, where this model carries them
-            if name in self.names:
-                i = self.names.index(name)
-                self.lbx[i] = self.ubx[i] = value
+            self._constant[i] = True
         self.effect_index = np.concatenate([u.index(f"effect{i}") for i in range(len(self.effects))] or [np.zeros(0, int)])
         self.effect_index = [int(i) for i in self.effect_index]
         self.effect_names = [self.names[i] for i in self.effect_index]
@@ -210,9 +211,7 @@ class GapModel:
         constants. Their columns of the residual Jacobian are then structurally zero (they are never
         free), so its colouring needs a direction per free shared unknown only: a 2995-ping transect's
         candidate Jacobian took 13 forward directions through the bottom-track rows, 9 of them for pins."""
-        pinned = np.zeros(len(self.names), dtype=bool)
-        pinned[[self.names.index(n) for n in [*self.base.pins.values, *self.base.held] if n in self.names]] = True
-        self._constant = pinned
+        pinned = self._constant
         free = np.flatnonzero(~pinned)
         S = ca.DM(ca.Sparsity.triplet(len(self.names), len(self.names), free.tolist(), free.tolist()), self.scale[free])
         return ca.mtimes(S, z) + ca.DM(np.where(pinned, self.lbx, 0.0))
