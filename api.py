@@ -632,8 +632,9 @@ def diagnose(cases, calibration=None, *, effects=None, attitude: str = "auto", n
         The base's vessel velocity: a velocity at every ping tied by a random-walk prior whose
         intensity the data set (a real boat's ping-to-ping speed changes are motion), or a
         piecewise-linear curve through knots (smooth simulated courses); ``auto`` (default): the
-        random walk where the beams take the sensor's samples (every real file, with GNSS or without),
-        knots where a motion model follows the attitude or the reference is stationary.
+        random walk where the beams take the sensor's samples (every real file, with GNSS or without)
+        or a motion model follows the attitude only beyond the sensors' noise, knots where it follows
+        to their noise or the reference is stationary.
     given : sequence of str, optional
         Effects the run is known to carry (e.g. what its clean run named): fitted first and kept
         in every model, so the candidates are judged on top of them (``result.given`` holds

@@ -215,7 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--navigation", default="knots", choices=["knots", "random_walk", "auto"],
                        help="the vessel's velocity: knots (piecewise-linear), random_walk (a velocity at every ping, "
                             "its random-walk intensity and the noise levels from the data) or auto (random_walk for "
-                            "a run under way whose beams take the sensor's samples, as a real file's do)")
+                            "a run under way whose beams take the sensor's samples, as a real file's do, or whose motion "
+                            "model follows the attitude only beyond the sensors' noise)")
         s.add_argument("--moving-bed", default="auto", choices=["auto", "off", "constant", "section"],
                        help="bed moving under the bottom track: auto (with a moving reference a constant bed, kept only "
                             "when a test says it moves), off (a bed verified fixed), constant, or section (a function "
@@ -279,8 +280,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--navigation", default="auto", choices=["auto", "random_walk", "knots"],
                    help="the base's vessel velocity: random_walk (a velocity at every ping, its random-walk intensity "
                         "from the data: a real boat's speed changes between fixes are motion), knots (a smooth curve) "
-                        "or auto: random_walk where the beams take the attitude sensor's samples (every real file), knots where a "
-                        "motion model follows the attitude or the reference is stationary")
+                        "or auto: random_walk where the beams take the attitude sensor's samples (every real file) or a motion "
+                        "model follows the attitude only beyond the sensors' noise, knots where it follows to their noise or "
+                        "the reference is stationary")
     s.add_argument("--field-selftest", action="store_true",
                    help="what this file can detect: the field's errors (compass offset, attitude and reference latency, "
                         "moving bed, sound speed, tilt low-pass, heave) injected at typical sizes into its recorded "

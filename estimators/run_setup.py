@@ -30,19 +30,25 @@ def has_moving_reference(case: Case) -> bool:
     return ref is not None and not ref.stationary and ref.velocity_m_s is not None
 
 
-def choose_navigation(case: Case, attitude_source: str, requested: str = "auto") -> str:
+def choose_navigation(case: Case, attitude_source: str, requested: str = "auto", irregular: bool = False) -> str:
     """A run's vessel-velocity model: ``requested``, or for ``auto`` a velocity per ping
-    (``random_walk``) where the beams take the sensor's samples and no reference holds the run
-    still (a real boat, which changes speed between two fixes: the bottom track sees it, a smooth
-    curve does not; without a reference the bottom track alone follows it, and a smooth curve
-    through it leaves the boat's own motion as a gap), ``knots`` where a motion model follows the
-    attitude (its course as smooth as the model) or the reference stays put."""
+    (``random_walk``) where no reference holds the run still and the boat's motion is irregular:
+    its beams take the sensor's samples, or the motion model follows the attitude only beyond the
+    sensors' noise (``irregular``, :func:`~adcpdyn.estimators.calibration.problem.irregular_attitude`:
+    a white residual of several degrees, as a real boat's aliased yaw leaves). A real boat changes
+    speed between two fixes: the bottom track sees it, a smooth curve does not; without a
+    reference the bottom track alone follows it, and a smooth curve through it leaves the boat's
+    own motion as a gap (a 94-s window of RiverPro_test01, whose heading the model follows to 4.3
+    deg of white residual, was blind on knots to a 0.2 m/s bed and a 2-s reference delay).
+    ``knots`` where a motion model follows the attitude to the sensors' noise (its course as
+    smooth as the model) or the reference stays put."""
     if requested not in NAVIGATION_CHOICES:
         raise ValueError(f"navigation: expected one of {list(NAVIGATION_CHOICES)}, got {requested!r}")
     if requested != "auto":
         return requested
     held_still = case.reference is not None and case.reference.stationary
-    return "random_walk" if attitude_source == "samples" and not held_still else "knots"
+    moving = attitude_source == "samples" or (attitude_source == "model" and irregular)
+    return "random_walk" if moving and not held_still else "knots"
 
 
 @dataclass(frozen=True)

@@ -220,12 +220,15 @@ def test_a_noisy_compass_keeps_the_motion_model_turns_do_not():
     """3-deg compass noise (white) leaves the model in place; the same run with its heading
     readings turned by a slow 20-deg swing (motion the model cannot follow) takes the samples."""
     from adcpdyn.estimators.attitude_fit import fit_attitude
-    from adcpdyn.estimators.calibration.problem import choose_attitude
+    from adcpdyn.estimators.calibration.problem import choose_attitude, irregular_attitude
 
     sc = get_scenario("pool_m0")
     sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, noise=dataclasses.replace(sc.run.noise, heading_rad=np.deg2rad(3.0))))
     case = simulate(sc, seed=1)
     assert choose_attitude(case, fit_attitude(case))[0] == "model"
+    # the model follows it, but not to a compass's noise: no smooth course is vouched for (auto navigation walks)
+    assert irregular_attitude(fit_attitude(case))
+    assert not irregular_attitude(fit_attitude(simulate(get_scenario("pool_m0"), seed=1)))  # its 0.5-deg compass
     t = case.attitude.time_s
     swing = np.deg2rad(20.0) * np.sin(2 * np.pi * (t - t[0]) / (t[-1] - t[0]) * 1.5)
     turned = dataclasses.replace(case, attitude=dataclasses.replace(case.attitude, heading_rad=case.attitude.heading_rad + swing))

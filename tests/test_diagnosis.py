@@ -744,3 +744,24 @@ def test_pinned_quantities_are_constants_of_the_models_graph():
                                rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match=f"fixed: {name} is held at 0.3 in this model's graph, got 0.5"):
         pinned.solve(x[None, :], {k: 0.05 for k in pinned.sigma_keys}, fixed={name: 0.5})
+
+
+@pytest.mark.slow  # 5-8 s: `make test-slow`
+@pytest.mark.skipif(not (REAL / "RiverPro_test01.PD0").is_file(), reason="real file absent")
+def test_a_real_window_its_motion_model_follows_only_loosely_walks():
+    """RiverPro_test01 from 90 s: the damped-mode model follows its attitude (a white residual, so the
+    beams take the model) but only to 4 deg of heading, no compass's noise: the boat's course is not
+    vouched smooth, so auto gives it a velocity per ping, and a 2-s reference delay written in is named
+    with its size (on knots it had said none, as it did for a 0.2 m/s bed)."""
+    from adcpdyn import api
+    from adcpdyn.estimators.diagnosis.field_errors import inject
+
+    case = api.import_file(REAL / "RiverPro_test01.PD0", start_s=90.0).case
+    calibration = as_record(api.calibrate(case, n_starts=4))
+    assert calibration.attitude_source == "model"
+    config = DiagnosisConfig(effects=("reference_latency", "compass_offset", "moving_bed"))
+    r = diagnose(inject(case, "reference_latency_s", 2.0), config, calibration=calibration)
+    assert r.base["attitude_source"] == "model" and r.base["navigation"] == "random_walk"
+    assert r.verdict == "reference_latency"
+    delay = next(s for s in r.ranking if s["effect"] == "reference_latency")
+    assert abs(delay["params"]["reference_latency.delay_s"] - 2.0) < 3 * delay["params_se"]["reference_latency.delay_s"]

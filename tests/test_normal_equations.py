@@ -214,7 +214,8 @@ def test_random_walk_rows_are_velocity_increments_over_root_dt():
 
 def test_auto_navigation_walks_where_a_real_boat_is_under_way():
     """auto: a velocity per ping where the sensor's samples are in the beams (a real boat) and no
-    reference holds the run still, with or without a moving reference; knots where a motion model
+    reference holds the run still, with or without a moving reference, or where the motion model
+    follows the attitude only beyond the sensors' noise (irregular); knots where a motion model
     follows the attitude or the reference stays put."""
     from adcpdyn.cases.scenario import get_scenario
     from adcpdyn.cases.simulation import simulate
@@ -225,8 +226,11 @@ def test_auto_navigation_walks_where_a_real_boat_is_under_way():
     assert case.reference is not None and not case.reference.stationary
     assert choose_navigation(case, "samples") == "random_walk"
     assert choose_navigation(case, "model") == "knots"
+    assert choose_navigation(case, "model", irregular=True) == "random_walk"
+    assert choose_navigation(case, "frozen", irregular=True) == "knots"  # the two-stage method's fixed attitude
     still = case.replace(reference=dataclasses.replace(case.reference, stationary=True))
     assert choose_navigation(still, "samples") == "knots"
+    assert choose_navigation(still, "model", irregular=True) == "knots"
     assert choose_navigation(case.replace(reference=None), "samples") == "random_walk"  # the bottom track alone follows it
     assert choose_navigation(case.replace(reference=None), "model") == "knots"
     assert choose_navigation(case, "samples", "knots") == "knots"

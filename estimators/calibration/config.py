@@ -53,8 +53,9 @@ class CalibrationConfig:
         velocity at every ping under a random-walk prior, its intensity and every noise level
         from the data by variance components: a real boat's speed changes between two fixes are
         motion, which the bottom track sees and a smooth curve does not) or ``auto`` (the random
-        walk for a run whose beams take the sensor's samples and that no stationary reference
-        holds still, as a real file's do; knots otherwise:
+        walk for a run that no stationary reference holds still and whose beams take the sensor's
+        samples, as a real file's do, or whose motion model follows the attitude only beyond the
+        sensors' noise; knots otherwise:
         :func:`~adcpdyn.estimators.run_setup.choose_navigation`).
     lever_box_m : float, optional
         Bound on every lever-arm coordinate (default: half the vessel length, else 10 m).

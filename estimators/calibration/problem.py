@@ -125,6 +125,14 @@ def choose_attitude(case: Case, fit: AttitudeFit, requested: str = "auto") -> tu
     return "model", "the damped-mode model follows the attitude samples"
 
 
+def irregular_attitude(fit: AttitudeFit) -> bool:
+    """Whether the damped-mode model leaves more than the sensors' noise (``MAX_MODEL_RESIDUAL_RAD``)
+    on some axis, coloured or white: motion irregular at the ping scale (a small boat's yaw
+    aliased by its samples) or a sensor far noisier than a compass. Either way the model does
+    not vouch for a smooth course (:func:`~adcpdyn.estimators.run_setup.choose_navigation`)."""
+    return bool(np.any(np.asarray(fit.sigmas) > np.asarray(MAX_MODEL_RESIDUAL_RAD)))
+
+
 
 
 class CalibrationProblem:
@@ -154,7 +162,7 @@ class CalibrationProblem:
         runs = []
         for case, f in zip(self.cases, self.fits):
             source, reason = ("frozen", "two-stage method") if self.two_stage else choose_attitude(case, f, config.attitude)
-            navigation = choose_navigation(case, source, config.navigation)
+            navigation = choose_navigation(case, source, config.navigation, irregular_attitude(f))
             knots = ping_knots(case) if navigation == "random_walk" else knot_times(case, config.velocity_knot_interval_s)
             runs.append(RunSetup(case, f, source, choose_timing(case, f, config.timing), knots,
                                  config.use_ranges and case.pings.bt_range_m is not None, reason, navigation=navigation))

@@ -25,7 +25,7 @@ import numpy as np
 from ...cases.case import Case
 from ...models.effects import get_effect
 from ..attitude_fit import fit_attitude
-from ..calibration.problem import choose_attitude
+from ..calibration.problem import choose_attitude, irregular_attitude
 from ..calibration.record import CalibrationRecord
 from ..knots import knot_times, ping_knots
 from ..measurement_model import EffectTerm, ModelSpec
@@ -79,7 +79,7 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationReco
         if own and own.attitude_model is not None:  # this very run was calibrated: its motion model starts the fit
             af = dataclasses.replace(af, params=own.attitude_model)
         source, reason = choose_attitude(case, af, config.attitude)
-        navigation = choose_navigation(case, source, config.navigation)
+        navigation = choose_navigation(case, source, config.navigation, irregular_attitude(af))
         knots = ping_knots(case) if navigation == "random_walk" else knot_times(case, None)
         runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason,
                              navigation=navigation))
