@@ -746,6 +746,27 @@ def test_pinned_quantities_are_constants_of_the_models_graph():
         pinned.solve(x[None, :], {k: 0.05 for k in pinned.sigma_keys}, fixed={name: 0.5})
 
 
+def test_a_compass_error_and_a_bed_on_one_course_are_said_to_look_alike():
+    """One run: a compass error chosen while a moving bed is significant too (or the other way round)
+    is said to be indistinguishable from it there, with the run's course over ground; several runs,
+    another pair or no rival say nothing."""
+    from adcpdyn.estimators.diagnosis.statement import compass_or_bed
+
+    course = np.deg2rad(45.0)
+    v = np.tile([np.cos(course), np.sin(course), 0.0], (20, 1))
+    v[3] = np.nan  # a missing fix
+    run = SimpleNamespace(moving_reference=True, reference_velocity_m_s=v)
+    one = SimpleNamespace(runs=[run])
+    said = compass_or_bed("compass_offset", ["compass_offset", "moving_bed", "heave"], one)
+    assert said["significant_too"] == ["moving_bed"] and "course over ground 45 deg" in said["statement"]
+    assert "calibrate --joint" in said["statement"]
+    said = compass_or_bed("moving_bed", ["compass_deviation", "moving_bed", "compass_offset"], one)
+    assert said["significant_too"] == ["compass_deviation", "compass_offset"] and " are significant too" in said["statement"]
+    assert compass_or_bed("compass_offset", ["compass_offset", "compass_deviation"], one) is None  # both the compass
+    assert compass_or_bed("heave", ["heave", "moving_bed", "compass_offset"], one) is None
+    assert compass_or_bed("compass_offset", ["compass_offset", "moving_bed"], SimpleNamespace(runs=[run, run])) is None
+
+
 @pytest.mark.slow  # 5-8 s: `make test-slow`
 @pytest.mark.skipif(not (REAL / "RiverPro_test01.PD0").is_file(), reason="real file absent")
 def test_a_real_window_its_motion_model_follows_only_loosely_walks():

@@ -41,7 +41,7 @@ from .model import Fit, GapModel, residual_peaks
 from .profiles import REFERENCE_DELAY, delay_profile, fixed_points, marginal_profile
 from .selection import (EffectScore, confounding, needs_ping_evidence, ping_evidence, preference, score_effect,
                         significant)
-from .statement import calibration_base_note, confounding_reason, not_the_base, reading_of
+from .statement import calibration_base_note, compass_or_bed, confounding_reason, not_the_base, reading_of
 
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
@@ -73,6 +73,7 @@ class DiagnosisResult:
     given_covariance: dict = field(default_factory=dict)  # {"names": [...], "matrix": [[...]]} of the given unknowns
     confounded: list = field(default_factory=list)
     alternatives: list = field(default_factory=list)  # per chosen effect: the others of its round nearly as good
+    look_alike: list = field(default_factory=list)  # a compass error chosen on one run while a bed is significant too, or vice versa
     runs: list = field(default_factory=list)
     run_holdout: dict = field(default_factory=dict)
     fits: dict = field(default_factory=dict, repr=False)  # name -> (GapModel, Fit), for figures
@@ -163,7 +164,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     # round 1: every candidate against the base (the ranking); later rounds: on top of the chosen ones
     noise = dict(sigma_fit)
     n_obs = int((base_model.mask > 0).sum())
-    selected_terms, selected, confounded, ranking, alternatives = [], [], [], [], []
+    selected_terms, selected, confounded, ranking, alternatives, look_alike = [], [], [], [], [], []
     current_name, current = "base", (base_model, base_fit)
     walk = base_model.random_walk  # a velocity per ping: long held-out blocks, a smaller shrink share or a paired gain
     block_s = config.block_s(walk)
@@ -273,6 +274,9 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                                  "delta_bic": best.delta_bic, "gap_after": best.gap_after,
                                  "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
                                                    "gap_after": s.gap_after, **reading_of(s, cases)} for s in close]})
+        one_course = compass_or_bed(best.effect, [s.effect for s in scores if s.significant], base)
+        if one_course and not look_alike:  # said once: a later round's pair is the same question
+            look_alike.append(one_course)
         selected.append(best.effect)
         if best.effect in config.given:  # moved from the runs' own values: free from here on
             base = released(base, best.effect)
@@ -326,6 +330,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                       + f" vs {a['gap_after']:.3f}): these data hardly tell them apart, so read "
                       f"{a['chosen']} as the likeliest of them, not as proven"
                       + "".join(f" ({x['effect']}: {x['reading']['text']})" for x in a["alternatives"] if "reading" in x))
+    statement += "".join("; " + a["statement"] for a in look_alike)
     for sc in chosen if selected else []:
         statement += "".join(f"; {sc.effect}: {r['text']}" for r in reading_of(sc, cases).values())
     if given:
@@ -368,7 +373,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, given=given,
         given_covariance=given_covariance,
         confounded=confounded,
-        alternatives=alternatives,
+        alternatives=alternatives, look_alike=look_alike,
         runs=[c.name for c in cases], run_holdout=run_holdout, fits=fits, cv_residuals=cv, noise_levels=noise)
 
 

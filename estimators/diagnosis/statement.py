@@ -1,5 +1,6 @@
 """The words of a diagnosis's statement beyond its numbers: why an effect cannot be told from
-what it is confounded with, what a remaining gap on a random-walk base is not, a sound-speed
+what it is confounded with (a compass error or a bed on one course), what a remaining gap on a
+random-walk base is not, a sound-speed
 estimate in the field's terms, and the note when the runs diagnosed are a calibration's own,
 calibrated on another navigation than the base's. Apart from the orchestrator (:mod:`.diagnose`),
 which composes them with the numbers.
@@ -14,21 +15,51 @@ from .readings import sound_speed_reading
 from .selection import EffectScore
 
 
+def _courses(base: DiagnosisBase) -> list:
+    """Each moving-reference run's mean course over ground (deg, as text)."""
+    courses = []
+    for r in base.runs:
+        if r.moving_reference:
+            v = r.reference_velocity_m_s[:, :2]
+            ok = np.all(np.isfinite(v), axis=1)
+            courses.append(f"{np.rad2deg(np.angle(np.mean(np.exp(1j * np.arctan2(v[ok, 1], v[ok, 0]))))) % 360:.0f}")
+    return courses
+
+
 def confounding_reason(effect: str, names: list, base: DiagnosisBase) -> str:
     """Why two things are not told apart here, in the field's words."""
     joined = ", ".join(names)
     if effect == "moving_bed" and any(n.startswith(("heading_misalignment", "installation_yaw")) for n in names):
-        courses = []
-        for r in base.runs:
-            if r.moving_reference:
-                v = r.reference_velocity_m_s[:, :2]
-                ok = np.all(np.isfinite(v), axis=1)
-                courses.append(f"{np.rad2deg(np.angle(np.mean(np.exp(1j * np.arctan2(v[ok, 1], v[ok, 0]))))) % 360:.0f}")
+        courses = _courses(base)
         return (f"moving bed vs {'heading misalignment' if base.spec.heading != 'off' else 'installation yaw'}: "
                 f"{'one course' if len(courses) == 1 else 'courses'} over ground {', '.join(courses)} deg, along which a bed "
                 "moving under the bottom track and a heading error look alike; calibrate transects in several directions "
                 "together (calibrate --joint) and diagnose with that calibration")
     return f"{effect} vs {joined}: these data do not tell them apart"
+
+
+HEADING_EFFECTS = ("compass_offset", "compass_deviation")
+
+
+def compass_or_bed(chosen: str, significant: list, base: DiagnosisBase) -> dict | None:
+    """On one run, the words for a compass error chosen while a moving bed is significant too (or the
+    other way round): across one course both turn the bottom track against the reference alike
+    (a bed u across a course at speed s looks like a heading error of atan(u / s)), and only
+    runs on other courses tell what is constant across runs (the bed may change, the compass does
+    not); '' with several runs or no such pair."""
+    if len(base.runs) != 1 or chosen not in (*HEADING_EFFECTS, "moving_bed"):
+        return None
+    rivals = [s for s in significant if s != chosen and (s == "moving_bed") != (chosen == "moving_bed")
+              and s in (*HEADING_EFFECTS, "moving_bed")]
+    if not rivals:
+        return None
+    courses = _courses(base)
+    where = f" (course over ground {courses[0]} deg)" if courses else ""
+    words = (f"{' and '.join(rivals)} {'is' if len(rivals) == 1 else 'are'} significant too: on one run{where} a compass "
+             f"error and a bed moving across the course turn the bottom track against the reference alike, so this run "
+             f"cannot say which it is; calibrate runs on several courses together (calibrate --joint) and diagnose with "
+             f"that calibration")
+    return {"chosen": chosen, "significant_too": rivals, "statement": words}
 
 
 def not_the_base(model: GapModel) -> str:
