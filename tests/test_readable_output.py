@@ -88,6 +88,10 @@ def test_diagnosis_effect_table_and_formulation_table_fit_100_characters():
     assert parameter_text("effect0.C_rad", np.radians(-28.6), np.radians(1.2)) == "C -28.6 deg ± 1.2 deg"
     assert parameter_text("effect0.omega_rad_s", 7.2, 0.03) == "omega +7.2 rad/s ± 0.03 rad/s"
     assert parameter_text("effect0.C_rad", -0.5, 0.0, at_bound=True).endswith("at its bound: not determined")
+    assert parameter_text("tilt_lowpass.tau_s", 2.5, 5e9, span=5.0) == \
+        "tau +2.5 s, not determined (its standard error exceeds its range of 5 s)"
+    assert parameter_text("effect0.C_rad", -0.1, 6.0, span=1.0).endswith("range of 57.3 deg)")
+    assert parameter_text("tilt_lowpass.tau_s", 0.5, 0.1, span=5.0) == "tau +0.5 s ± 0.1 s"
 
 
 def test_selftest_confusion_matrix_fits_100_characters():

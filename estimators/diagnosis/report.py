@@ -11,6 +11,7 @@ import numpy as np
 
 from ...cases.atomic import atomic_path
 from ...cases.summary import error_velocity_levels
+from ...models.effects import get_effect
 from ...text import noise_level_text
 from ..calibration.result import jsonable
 from ..statistics.periodogram import lomb_scargle
@@ -78,9 +79,12 @@ def noise_text(result) -> str:
     return text
 
 
-def parameter_text(name: str, value: float, se: float | None, at_bound: bool = False) -> str:
+def parameter_text(name: str, value: float, se: float | None, at_bound: bool = False, span: float | None = None) -> str:
     """One fitted unknown in the field's units: ``delay 0.0077 s ± 0.0011 s``, angles in degrees
-    (``C -28.6 deg ± 1.2 deg``); one held at its bound says so instead of a standard error."""
+    (``C -28.6 deg ± 1.2 deg``); one held at its bound says so instead of a standard error, and one
+    whose standard error exceeds ``span`` (the width of its plausible range) is not determined:
+    the data leave it anywhere in that range (a tilt low-pass under a motion model with no tilt
+    rate to filter, ± 5e9 s)."""
     short = name.split(".", 1)[-1]
     unit, scale = "", 1.0
     if short.endswith("_rad"):  # an angle (a rate is _rad_s)
@@ -93,6 +97,8 @@ def parameter_text(name: str, value: float, se: float | None, at_bound: bool = F
     u = f" {unit}" if unit else ""
     if at_bound:
         return f"{short} {scale * value:+.4g}{u} at its bound: not determined"
+    if span is not None and se is not None and np.isfinite(span) and (not np.isfinite(se) or se > span):
+        return f"{short} {scale * value:+.4g}{u}, not determined (its standard error exceeds its range of {scale * span:.3g}{u})"
     spread = "± n/a" if se is None or not np.isfinite(se) else f"± {scale * se:.2g}{u}"
     return f"{short} {scale * value:+.4g}{u} {spread}"
 
@@ -116,9 +122,10 @@ def parameters_text(score: dict, nyquist_hz: float | None = None) -> str:
     """An effect's fitted unknowns (:func:`parameter_text`), comma separated; a frequency the pings
     sample above their Nyquist ``nyquist_hz`` says so (:func:`alias_note`)."""
     bound = score.get("at_bound", [])
+    spans = {p.name: p.upper - p.lower for p in get_effect(score["effect"]).parameters} if "effect" in score else {}
     out = []
     for n, v in score["params"].items():
-        text = parameter_text(n, v, score["params_se"].get(n), n in bound)
+        text = parameter_text(n, v, score["params_se"].get(n), n in bound, spans.get(n.split(".", 1)[-1]))
         if nyquist_hz and n in PING_SAMPLED_FREQUENCIES:
             text += alias_note(v, nyquist_hz)
         out.append(text)
