@@ -30,18 +30,18 @@ from ..calibration.record import CalibrationRecord
 from ..knots import knot_times, ping_knots
 from ..measurement_model import EffectTerm, ModelSpec
 from ..run_setup import RunSetup, choose_navigation, course_offset_rad, heading_centre
-from ..statistics.normal_equations import VCE_RTOL, group_levels, largest_move, redundancy
+from ..statistics.normal_equations import VCE_RTOL, group_levels, largest_move, redundancy, scored_levels
 from .config import DiagnosisConfig
 from .model import DiagnosisBase, Fit, GapModel, Pins, free_jacobian, velocity_columns
 
 INDEPENDENT_NOISE = ("heading", "pitch", "roll", "bt", "reference", "motion", "vertical")  # estimated without the model (pre-fit, error velocity, first differences)
 PER_RUN_EFFECTS = ("moving_bed", "heave", "forced_roll", "surge")
-# variance-component re-estimations of the base (each with a refit). A random walk's levels crawl there: RiverPro's
-# vertical level 9.8, 7.7, 6.3, 5.2 % a round after its third, still 2.5 % after twelve; neither Aitken's
-# delta-squared per level nor SQUAREM on all of them settled RiverPro within ten (winriver02 SQUAREM did, in seven),
-# so the diagnosis keeps three and says how far they still move (the clean files' verdicts were the same either way)
-VCE_ITERATIONS = 3
-
+# variance-component re-estimations of the base (each with a refit), until no level moves by more than VCE_RTOL. A random
+# walk's levels crawl there by the redundancies' iteration (RiverPro's vertical level 9.8, 7.7, 6.3, 5.2 % a round
+# after its third, still 2.5 % after twelve; neither Aitken's delta-squared per level nor SQUAREM settled it within
+# ten): Fisher scoring (normal_equations.scored_levels) takes the steps where its dense algebra is cheap, 5 on RiverPro
+# and winriver01; winriver02's 2500 unknowns iterate the redundancies, about 15 rounds
+VCE_MAX_ITERATIONS = 20
 
 def group_sigma(model: GapModel, raw: np.ndarray) -> dict:
     out = {}
@@ -164,8 +164,8 @@ def fit_base(cases, config: DiagnosisConfig, calibration: CalibrationRecord | No
     fit = model.solve(x0, base.sigma0)
     sigma = dict(base.sigma0)
     if model.random_walk:  # a velocity per ping: every noise level and the walk's intensity from the data
-        fit, sigma, base.noise_moved = noise_from_data(model, fit)
-        base.notes.append(settled_note(base.noise_moved))
+        fit, sigma, base.noise_moved, count = noise_from_data(model, fit)
+        base.notes.append(settled_note(base.noise_moved, count))
         return base, model, fit, sigma
     rms = group_sigma(model, fit.raw)
     for key in model.sigma_keys:
@@ -176,24 +176,34 @@ def fit_base(cases, config: DiagnosisConfig, calibration: CalibrationRecord | No
 
 
 def noise_from_data(model: GapModel, fit: Fit, fixed: dict | None = None) -> tuple:
-    """(fit, noise levels, the largest relative move of a level at the last re-estimation) after
-    :data:`VCE_ITERATIONS` variance-component re-estimations, each with a refit (``fixed``: unknowns
-    held at their values). A walk's levels crawl to their fixed point (the beams', the reference's
-    and the vertical's trading the velocity between them), so the move is reported, not hidden."""
-    sigma, moved = fit.sigma, np.inf
-    for _ in range(VCE_ITERATIONS):
-        new = variance_components(model, fit)
+    """(fit, noise levels, the largest relative move of a level at the last re-estimation, the
+    re-estimations made): variance-component re-estimations, each with a refit (``fixed``: unknowns
+    held at their values), until settled (no level moves more than ``VCE_RTOL``) or
+    :data:`VCE_MAX_ITERATIONS`; a scoring step (:func:`scored_components`) where the model is small
+    enough, else the redundancies' step (:func:`variance_components`). What is left of the move is
+    reported, not hidden."""
+    sigma, moved, count = fit.sigma, np.inf, 0
+    while count < VCE_MAX_ITERATIONS and moved > VCE_RTOL:
+        new = scored_components(model, fit) or variance_components(model, fit)
         moved, sigma = largest_move(new, sigma), new
         fit = model.solve(fit.x, sigma, fixed=fixed)
-    return fit, sigma, moved
+        count += 1
+    return fit, sigma, moved, count
 
 
-def settled_note(moved: float) -> str:
+def settled_note(moved: float, count: int) -> str:
     """The base's noise levels in words: settled, or how far from it (what its standard errors scale with)."""
-    head = f"noise levels re-estimated {VCE_ITERATIONS} times"
+    head = f"noise levels re-estimated {count} times"
     if moved <= VCE_RTOL:
         return f"{head}, settled to {100 * VCE_RTOL:g} %"
     return f"{head}, NOT settled: they still moved {100 * moved:.1f} % at the last (the standard errors scale with them)"
+
+
+def scored_components(model: GapModel, fit: Fit) -> dict | None:
+    """The noise levels after one Fisher-scoring step (:func:`~adcpdyn.estimators.statistics.normal_equations.scored_levels`)
+    from the fit's levels; None where the model is too large for its dense algebra."""
+    J, _ = free_jacobian(fit)
+    return scored_levels(J, fit.raw, model.row_sigma, model.mask > 0, model.sigma_keys, fit.sigma)
 
 
 def variance_components(model: GapModel, fit: Fit) -> dict:

@@ -190,7 +190,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             # pull them back (winriver01's own sound speed 0.0223 refitted, 0.0284 at its marginal maximum)
             at_profile = {n: float(gf.x[gm.names.index(n)]) for n in gm.names if n.endswith((REFERENCE_DELAY, *VELOCITY_SCALES))}
             profile_se = gf.profile_se
-            gf, noise, _ = noise_from_data(gm, gf, fixed={**pinned_effect_parameters(gm, base), **at_profile})
+            gf, noise, _, _ = noise_from_data(gm, gf, fixed={**pinned_effect_parameters(gm, base), **at_profile})
             gf.profile_se = profile_se
             current = (gm, gf)
         current_name = "given:" + "+".join(config.given)
