@@ -243,7 +243,7 @@ def test_long_held_out_blocks_on_a_random_walk_see_a_compass_offset():
     are predicted from the beams, and the offset is named there, its estimate within 3 SE of 4 deg."""
     from adcpdyn import api
     from adcpdyn.estimators.diagnosis.field_errors import inject
-    from adcpdyn.estimators.diagnosis.selection import ping_evidence
+    from adcpdyn.estimators.diagnosis.selection import _held_out, ping_evidence
 
     case = api.import_file(REAL / "RiverPro_test01.PD0").case
     calibration = as_record(api.calibrate(case, n_starts=4))
@@ -254,7 +254,9 @@ def test_long_held_out_blocks_on_a_random_walk_see_a_compass_offset():
     (base, fit_base), (model, fit) = r.fits["base"], r.fits["compass_offset"]
     at_ping = ping_evidence(model, cv_residuals(model, fit, config.cv_folds, config.cv_block_s), base,
                             cv_residuals(base, fit_base, config.cv_folds, config.cv_block_s), r.noise_levels)
-    assert at_ping["shrink_fraction"] < config.min_shrink_walk and at_ping["heldout_z"] < config.heldout_z_walk
+    # the ping-scale blocks alone would not name it (their criterion: a share of a gap there is, or a paired z)
+    assert not _held_out(config, at_ping["shrink_fraction"], at_ping["gap_before"], at_ping["gap_after"], at_ping["heldout_z"])
+    assert at_ping["shrink_fraction"] < s["shrink_fraction"] and at_ping["heldout_z"] < config.heldout_z_walk
     est, se = np.degrees(s["params"]["compass_offset.A_rad"]), np.degrees(s["params_se"]["compass_offset.A_rad"])
     assert abs(est - 4.0) < 3 * se
 
