@@ -42,7 +42,8 @@ from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..knots import knot_times, ping_knots
 from ..measurement_model import ANGLE_NAMES, ModelSpec, SurveyModel, default_threads
 from ..run_setup import RunSetup, choose_navigation, course_offset_rad, heading_span
-from ..statistics.normal_equations import VCE_RTOL, group_levels, largest_move, redundancy
+from ..statistics.normal_equations import (SCORING_MAX_UNKNOWNS, VCE_RTOL, group_levels, largest_move, redundancy,
+                                           scored_levels)
 from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
 from .config import CalibrationConfig
 from .moving_bed_decision import mean_flow_speed, moving_bed_test
@@ -69,7 +70,8 @@ COMPILE_MIN_PINGS = 500
 # (their fixed point: one step left winriver01's reference level 35 % above it and its yaw SE 1.47 deg, 1.13 at
 # it), at most VCE_MAX_ITERATIONS times; the result's message says how many and whether they settled. A random
 # walk's (Helmert) levels crawl there, the beams' and the reference's trading the velocity between them
-# (winriver02: 9 % a round after three, 2.9 % after ten), so it keeps VCE_WALK_ITERATIONS and says it has not settled
+# (winriver02: 9 % a round after three, 2.9 % after ten), so it keeps VCE_WALK_ITERATIONS and says it has not settled,
+# unless the problem is small enough for Fisher-scoring steps (SCORING_MAX_UNKNOWNS), which settle in a few
 VCE_MAX_ITERATIONS = 10
 VCE_WALK_ITERATIONS = 3
 # IPOPT's initial barrier for the refit after the noise levels, which starts at the solution: at 0.1 (a
@@ -366,11 +368,11 @@ class CalibrationProblem:
     def _noise_fixed_point(self, ms: MultistartResult, lbz, ubz) -> tuple:
         """(refit, re-estimations, largest relative move of a noise level at the last one): the noise levels
         re-estimated from the fit and the problem refitted from its solution until no level moves by more
-        than VCE_RTOL (at least one refit; at most VCE_MAX_ITERATIONS, a random walk's VCE_WALK_ITERATIONS),
+        than VCE_RTOL (at least one refit; at most VCE_MAX_ITERATIONS, a large random walk's VCE_WALK_ITERATIONS),
         so the answer is the levels' fixed point, not wherever one step from the independent starting levels
         lands; the move reported after the last round is the next re-estimation's."""
         refit, solver = ms, self._refit_solver()
-        most = VCE_WALK_ITERATIONS if self.walk else VCE_MAX_ITERATIONS
+        most = VCE_WALK_ITERATIONS if self.walk and self.lbx.size > SCORING_MAX_UNKNOWNS else VCE_MAX_ITERATIONS
         for rounds in range(1, most + 1):
             new = self._noise_levels(refit.x)
             moved = largest_move(new, self.sigma)
@@ -395,7 +397,8 @@ class CalibrationProblem:
         degrees of freedom shared out; with a random walk, its residuals over their redundancy
         (Helmert / Foerstner variance components, the walk's intensity one of them: REML for a
         linear-Gaussian walk), since a velocity per ping takes up a share of each group that
-        differs from group to group."""
+        differs from group to group; reached by Fisher scoring where the problem has at most
+        ``SCORING_MAX_UNKNOWNS`` unknowns (``normal_equations.scored_levels``), whose steps do not crawl."""
         raw = np.asarray(self.residual_fun(z, self.weights())[1]).ravel()
         if not self.walk:
             return self.model.reestimate_sigmas(raw, len(z), self.sigma)
@@ -403,6 +406,9 @@ class CalibrationProblem:
         J = self.jacobian_fun(z, self.weights())
         J = J.tocsr() if sp.issparse(J) else J.sparse()
         used = model.mask > 0
+        scored = scored_levels(J, raw, model.row_sigma, used, model.sigma_keys, self.sigma)
+        if scored is not None:  # a Fisher-scoring step to the same fixed point, where the dense algebra is cheap
+            return scored
         r = redundancy(J, model.row_sigma, used, len(model.sigma_keys), local=model.velocity_columns())
         return group_levels(raw, model.row_sigma, used, model.sigma_keys, r, self.sigma)
 
