@@ -184,7 +184,9 @@ def noise_from_data(model: GapModel, fit: Fit, fixed: dict | None = None) -> tup
     reported, not hidden."""
     sigma, moved, count = fit.sigma, np.inf, 0
     while count < VCE_MAX_ITERATIONS and moved > VCE_RTOL:
-        new = scored_components(model, fit) or variance_components(model, fit)
+        new = scored_components(model, fit)
+        if new is None:  # too large for the scoring's dense algebra
+            new = variance_components(model, fit)
         moved, sigma = largest_move(new, sigma), new
         fit = model.solve(fit.x, sigma, fixed=fixed)
         count += 1

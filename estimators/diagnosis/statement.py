@@ -46,7 +46,7 @@ def compass_or_bed(chosen: str, significant: list, base: DiagnosisBase) -> dict 
     other way round): across one course both turn the bottom track against the reference alike
     (a bed u across a course at speed s looks like a heading error of atan(u / s)), and only
     runs on other courses tell what is constant across runs (the bed may change, the compass does
-    not); '' with several runs or no such pair."""
+    not): ``{"chosen", "significant_too", "statement"}``, None with several runs or no such pair."""
     if len(base.runs) != 1 or chosen not in (*HEADING_EFFECTS, "moving_bed"):
         return None
     rivals = [s for s in significant if s != chosen and (s == "moving_bed") != (chosen == "moving_bed")
