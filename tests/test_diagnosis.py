@@ -638,6 +638,8 @@ def test_scoring_reaches_the_redundancies_fixed_point_in_a_few_steps():
     assert abs(scored[(0, "bt")] - 0.5) < 0.1 and abs(scored[(0, "motion")] - 0.3) < 0.1
     crawl = run(lambda Jw, raw, lv: group_levels(raw, group, used, keys, redundancy(Jw, group, used, 2), lv), 8)
     assert max(abs(crawl[k] / scored[k] - 1) for k in keys) > 1e-3  # still on its way after as many rounds
+    raw[5] = np.nan  # no step from a non-finite residual: None, so the caller takes the plain one
+    assert scored_levels(Jw, raw, group, used, keys, scored) is None
 
 
 def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement():

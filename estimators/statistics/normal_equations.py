@@ -286,6 +286,8 @@ def scored_levels(J, raw: np.ndarray, row_group: np.ndarray, used: np.ndarray, k
         step = np.linalg.solve(info, np.array(score))
     except np.linalg.LinAlgError:
         return None
+    if not np.all(np.isfinite(step)):  # a non-finite residual or Jacobian entry: the caller's plain step decides
+        return None
     out = dict(levels)
     for i, d in zip(groups, np.clip(step, -SCORING_MAX_STEP, SCORING_MAX_STEP)):
         out[keys[i]] = float(max(levels[keys[i]] * np.exp(0.5 * d), 1e-6))
