@@ -117,7 +117,7 @@ def choose_attitude(case: Case, fit: AttitudeFit, requested: str = "auto") -> tu
     """``model`` or ``samples`` for the beams' attitude, and why."""
     if requested != "auto":
         return requested, "requested"
-    excess = np.asarray(fit.sigmas) > np.asarray(MAX_MODEL_RESIDUAL_RAD)
+    excess = _beyond_sensor_noise(fit)
     if excess.any():
         excess &= np.abs(attitude_residual_lag1(case, fit)) > MIN_RESIDUAL_LAG1
     if excess.any():
@@ -132,7 +132,12 @@ def irregular_attitude(fit: AttitudeFit) -> bool:
     on some axis, coloured or white: motion irregular at the ping scale (a small boat's yaw
     aliased by its samples) or a sensor far noisier than a compass. Either way the model does
     not vouch for a smooth course (:func:`~adcpdyn.estimators.run_setup.choose_navigation`)."""
-    return bool(np.any(np.asarray(fit.sigmas) > np.asarray(MAX_MODEL_RESIDUAL_RAD)))
+    return bool(_beyond_sensor_noise(fit).any())
+
+
+def _beyond_sensor_noise(fit: AttitudeFit) -> np.ndarray:
+    """Per axis (heading, pitch, roll), whether the pre-fit's residual exceeds ``MAX_MODEL_RESIDUAL_RAD``."""
+    return np.asarray(fit.sigmas) > np.asarray(MAX_MODEL_RESIDUAL_RAD)
 
 
 

@@ -261,11 +261,10 @@ def scored_levels(J, raw: np.ndarray, row_group: np.ndarray, used: np.ndarray, k
     round after twelve). Each step is at most ``SCORING_MAX_STEP`` in a log-variance. None above
     ``SCORING_MAX_UNKNOWNS`` (the caller iterates :func:`group_levels` instead); groups as there."""
     J = as_sparse(J)
-    rows = np.flatnonzero(used)
-    Ju, g = J[rows], row_group[rows]
-    n = Ju.shape[1]
-    if n > SCORING_MAX_UNKNOWNS:
+    if J.shape[1] > SCORING_MAX_UNKNOWNS:
         return None
+    rows = np.flatnonzero(used)
+    Ju, g, ru = J[rows], row_group[rows], raw[rows]
     N = ridged((Ju.T @ Ju).tocsc()).toarray()
     try:
         M = np.linalg.inv(N)
@@ -274,11 +273,11 @@ def scored_levels(J, raw: np.ndarray, row_group: np.ndarray, used: np.ndarray, k
     groups = [i for i, key in enumerate(keys) if key[1] not in stated and np.sum(g == i) > 3]
     X, score, size = [], [], []
     for i in groups:
-        Jg = Ju[g == i]
-        X.append(np.asarray((sp.csr_matrix(Jg.T @ Jg).T @ M.T).T))  # M Jg^T Jg, dense
-        s2 = levels[keys[i]] ** 2
+        m = g == i
+        Jg = Ju[m]
+        X.append(np.asarray((Jg.T @ Jg) @ M).T)  # M Jg^T Jg (both symmetric), dense
         r = Jg.shape[0] - np.trace(X[-1])
-        score.append(0.5 * (np.sum(raw[rows][g == i] ** 2) / s2 - r))
+        score.append(0.5 * (np.sum(ru[m] ** 2) / levels[keys[i]] ** 2 - r))
         size.append(Jg.shape[0])
     info = np.array([[0.5 * ((size[a] - 2 * np.trace(X[a])) * (a == b) + np.sum(X[a] * X[b].T)) for b in range(len(groups))]
                      for a in range(len(groups))])
