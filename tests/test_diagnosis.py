@@ -834,3 +834,21 @@ def test_a_real_window_its_motion_model_follows_only_loosely_walks():
     assert r.verdict == "reference_latency"
     delay = next(s for s in r.ranking if s["effect"] == "reference_latency")
     assert abs(delay["params"]["reference_latency.delay_s"] - 2.0) < 3 * delay["params_se"]["reference_latency.delay_s"]
+
+
+def test_the_delay_profiles_curvature_is_its_envelopes_not_its_ripples():
+    """A marginal profile that ripples at the ping interval (half-interval points low, as on RiverPro
+    with a 2-s reference delay) about a downward parabola: the curvature is the envelope's, from the
+    whole-interval points, where a parabola through every point within two intervals curves up."""
+    from adcpdyn.estimators.diagnosis.profiles import envelope_parabola
+
+    step, best, a = 0.67, 2.01, -20.0  # the envelope a (d - 1.9)^2, its grid of whole intervals through 0
+    delays = [k * step for k in range(-1, 7)] + [best + h for h in (-step / 2, step / 2, -step / 4, step / 4)] + [best]
+    ripple = lambda d: -80.0 * (1.0 - np.cos(2 * np.pi * d / step)) / 2  # 0 on the grid, -80 half-way
+    marginal = {d: a * (d - 1.9) ** 2 + ripple(d) for d in delays}
+    grid_best = max((d for d in marginal if abs(d / step - round(d / step)) < 1e-9), key=marginal.get)
+    curvature, slope = envelope_parabola(marginal, grid_best, step)
+    assert curvature == pytest.approx(a) and slope == pytest.approx(2 * a * (grid_best - 1.9))
+    near = sorted(d for d in marginal if abs(d - grid_best) <= 2 * step)
+    assert np.polyfit(np.array(near) - grid_best, [marginal[d] for d in near], 2)[0] > 0  # every point: curves up
+    assert envelope_parabola({0.0: 1.0, step / 2: 2.0, step: 0.5}, 0.0, step) == (0.0, 0.0)  # two on the grid

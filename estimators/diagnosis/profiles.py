@@ -72,11 +72,12 @@ def delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile
     joint fit the NLP minimises prefers the reference samples on the pings' knots (0.38 s on clean
     winriver02, where the marginal is highest at 0). With ``profile``: a grid of one ping interval
     over +- :data:`REFERENCE_DELAY_SPAN_S`, then half and a quarter of one about the best, then the
-    vertex of a parabola through the points within two intervals of it, whose curvature gives the
-    standard error (``Fit.profile_se``; NaN at the span's edge or where the parabola does not curve
-    down). The marginal profile keeps a ripple at the ping interval where the reference samples sit
-    on the pings (RiverPro: +-30 in log-likelihood; a piecewise-linear path has no bridge variance
-    between its knots): the estimate is then drawn to the delays that keep them there. Without
+    vertex of a parabola through the whole-interval points within two intervals of it
+    (:func:`envelope_parabola`), whose curvature gives the standard error (``Fit.profile_se``; NaN at
+    the span's edge or where the parabola does not curve down). The marginal profile keeps a ripple
+    at the ping interval where the reference samples sit on the pings (RiverPro: +-30 in
+    log-likelihood; a piecewise-linear path has no bridge variance between its knots): the estimate
+    is then drawn to the delays that keep them there. Without
     ``profile``: held where ``values`` (the chosen model's) put it."""
 
     d0 = next(v for n, v in values.items() if n.endswith(REFERENCE_DELAY)) if not profile else 0.0
@@ -121,8 +122,7 @@ def delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile
             if abs(d) <= REFERENCE_DELAY_SPAN_S + 1e-9 and d not in tried:
                 visit(d, tried[best].values)
     best = max(tried, key=ll)
-    near = sorted(d for d in tried if abs(d - best) <= 2 * step + 1e-9)  # two intervals: past the ping-scale ripple
-    curvature, slope, _ = np.polyfit(np.array(near) - best, [ll(d) for d in near], 2) if len(near) >= 3 else (0.0, 0.0, 0.0)
+    curvature, slope = envelope_parabola(marginal, best, step)
     if curvature < 0:  # the parabola's vertex, within the last refinement's reach
         vertex = best + float(np.clip(-slope / (2 * curvature), -step / 4, step / 4))
         if vertex not in tried and abs(vertex) <= REFERENCE_DELAY_SPAN_S:
@@ -134,6 +134,20 @@ def delay_profile(base, terms, peaks, config, values: dict, sigma: dict, profile
     name = next(n for n in model.names if n.endswith(REFERENCE_DELAY))
     fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 and not edge else float("nan")}
     return model, fit
+
+
+def envelope_parabola(marginal: dict, best: float, step: float) -> tuple:
+    """(curvature, slope) at ``best`` of the parabola through the profile's points on the coarse grid
+    (whole ping intervals) within two intervals of it; (0, 0) with fewer than three. The marginal
+    ripples at the ping interval (RiverPro with a 2-s reference delay: 576 and 571 at +-0.67 s, 514 and
+    531 at +-0.34 s from the best), so a parabola through the half and quarter steps as well curves up
+    and leaves no standard error; the whole-interval points share one phase of the ripple and trace
+    its envelope."""
+    on_grid = [d for d in marginal if abs(d - best) <= 2 * step + 1e-9 and abs(d / step - round(d / step)) < 1e-6]
+    if len(on_grid) < 3:
+        return 0.0, 0.0
+    curvature, slope, _ = np.polyfit(np.array(on_grid) - best, [marginal[d] for d in on_grid], 2)
+    return float(curvature), float(slope)
 
 
 PROFILE_REFINEMENTS = 3
