@@ -78,8 +78,8 @@ class RunSetup:
     """The numeric decisions of one run, made before anything symbolic is built.
 
     ``attitude_source``: ``model`` (motion-model unknowns of this run), ``samples`` (the
-    sensor's samples interpolated linearly, data) or ``frozen`` (a model fixed beforehand,
-    the two-stage method). ``knots``: navigation-velocity knot times (None: stationary).
+    sensor's samples, data: :func:`~adcpdyn.estimators.attitude_fit.sampled_attitude`) or
+    ``frozen`` (a model fixed beforehand, the two-stage method). ``knots``: navigation-velocity knot times (None: stationary).
     ``reference_rows`` (derived from the knots): which reference samples enter (inside the pings' span).
     ``section_position``: position of each ping along the section in [0, 1] (section bed).
     ``navigation``: ``knots`` (the velocity piecewise-linear between the knots, nothing else) or

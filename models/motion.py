@@ -329,13 +329,14 @@ class SampledAttitude:
     frequency when no band is given, and never above). The secant of a linear segment is the
     rate at the segment's midpoint, 15-30 % off at 6 samples per roll period, and differences
     the sensor's noise: it biased lever arms and looked like effects in the diagnosis.
-    ``linear`` joins the samples with straight lines.
+    ``linear`` joins the samples with straight lines. ``reason``: why this interpolation, in words.
     """
 
     time_s: np.ndarray
     ypr_rad: np.ndarray
     interpolation: str = "spline"
     band_rad_s: float | None = None
+    reason: str = "smoothed within the motion band"
 
     def __post_init__(self):
         if self.interpolation not in SAMPLE_INTERPOLATIONS:

@@ -187,3 +187,33 @@ def test_a_calibration_on_the_samples_corrects_with_the_samples():
     exact = dynamic_correction(case, "rootfinder", CalibrationRecord.from_dict({**calib, "attitude_source": "samples"}))
     assert exact.provenance.rootfinder_unconverged_pings == 0
     assert np.nanmax(np.abs(exact.vessel_velocity_m_s - sampled.vessel_velocity_m_s)) < 1e-4
+
+
+def test_samples_too_sparse_for_the_motion_are_joined_linearly_not_smoothed_away():
+    """One recipe for the beams' attitude from samples: a smoothing spline within the motion band
+    where the samples resolve the motion; where most of an axis' variance lies above half their
+    Nyquist frequency (deep_ship's modes of 1.05-2.0 rad/s sampled every 1.6 s) the spline's penalty
+    cuts into the motion and departs from the noise-free samples where the beams ping, so the samples
+    are joined linearly and the reason is said. The share
+    itself: a sine above half the Nyquist frequency is all above it, one below none of it."""
+    from adcpdyn.estimators.attitude_fit import sampled_attitude, share_above_half_nyquist
+    from adcpdyn.models.motion import SampledAttitude, evaluate_attitude
+
+    t = np.arange(0.0, 300.0, 1.0)  # Nyquist pi rad/s
+    sines = np.column_stack([0.1 * np.sin(0.8 * np.pi * t), 0.1 * np.sin(0.3 * np.pi * t), 0.1 * np.sin(0.6 * np.pi * t)])
+    share = share_above_half_nyquist(t, sines)
+    assert share[0] > 0.95 and share[1] < 0.05 and share[2] > 0.95
+
+    sc = get_scenario("deep_ship")
+    case = simulate(noise_free(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=120.0))), seed=3)
+    dense = sampled_attitude(case)
+    assert dense.interpolation == "spline"
+    a = case.attitude
+    sparse = dataclasses.replace(a, **{f: getattr(a, f)[::8] for f in ("time_s", "heading_rad", "pitch_rad", "roll_rad")})
+    chosen = sampled_attitude(dataclasses.replace(case, attitude=sparse))
+    assert chosen.interpolation == "linear" and "roll" in chosen.reason and "Nyquist" in chosen.reason
+    at = lambda s: evaluate_attitude(s, sparse.time_s[2:-2])["ypr"]
+    truth = sparse.ypr()[2:-2]
+    spline = SampledAttitude(sparse.time_s, sparse.ypr(), band_rad_s=chosen.band_rad_s)
+    assert np.allclose(at(chosen), truth, atol=1e-12)  # the samples, where the beams ping
+    assert np.sqrt(np.mean((at(spline)[:, 2] - truth[:, 2]) ** 2)) > 0.02 * np.std(truth[:, 2])  # cut into the motion

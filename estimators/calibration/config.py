@@ -77,8 +77,9 @@ class CalibrationConfig:
         Threads solving starts at once.
     attitude : str
         Attitude of the beams: ``model`` (the damped-mode model fitted jointly, the paper's
-        method), ``samples`` (the sensor's samples interpolated linearly, fixed; for runs no
-        motion model follows: attitude sampled below the motion, long records with turns) or
+        method), ``samples`` (the sensor's samples, fixed: a smoothing spline within the motion
+        band, or straight segments where the samples are too sparse for it; for runs no motion
+        model follows: attitude sampled below the motion, long records with turns) or
         ``auto`` (samples when the pre-fit leaves residuals above ``MAX_MODEL_RESIDUAL_RAD``
         that are coloured, |lag-1 autocorrelation| > ``MIN_RESIDUAL_LAG1``: motion the model
         does not follow, not a noisy sensor).

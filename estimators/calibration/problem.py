@@ -471,7 +471,8 @@ class CalibrationProblem:
         sampled = [run.case.name for run in self.runs if run.attitude_source == "samples"]
         if sampled:
             reasons = "; ".join(sorted({run.attitude_reason for run in self.runs if run.attitude_source == "samples"}))
-            warn.append(f"beams' attitude from the sensor's samples, interpolated linearly ({reasons}); attitude_model is "
+            joined = "; ".join(sorted({run.samples.reason for run in self.runs if run.attitude_source == "samples"}))
+            warn.append(f"beams' attitude from the sensor's samples, {joined} ({reasons}); attitude_model is "
                         "the pre-fit, not used by the beams" + (f" (runs {', '.join(sampled)})" if len(self.runs) > 1 else ""))
         if aliased:
             warn.append("lever arms not determined: the attitude samples do not resolve the motion, so the rotation "

@@ -338,7 +338,8 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         statement = ("on top of " + whose + ", ".join(f"{n} = {v['value']:.4g} +- {v['se']:.2g}" for n, v in given.items())
                      + ": " + statement)
     if base.sampled:
-        reasons = "; ".join(dict.fromkeys(r.attitude_reason for r in base.runs if r.attitude_source == "samples"))
+        reasons = "; ".join(dict.fromkeys(f"{r.attitude_reason}; {r.samples.reason}" for r in base.runs
+                                          if r.attitude_source == "samples"))
         statement = ("beams' attitude from the sensor's samples (" + reasons + "): effects on the sensor are undone on "
                      "the samples; " + statement)
     other_base = calibration_base_note(calibration, base, selected, ranking)
