@@ -173,8 +173,10 @@ def markdown_table(res: dict) -> str:
 def limits_paragraph(res: dict, navigation: str = "random_walk") -> str:
     """docs/diagnosis.md's paragraph of the clean files' detection limits and of the misses, from the rows
     as measured: per error each file's limit ('over' where not even the largest size searched shows, or
-    read against the file's own delay peak), then the misses under
-    and above their file's limit."""
+    read against the file's own delay peak), then the misses under and above their file's limit, and
+    how many named errors' estimates lie within two standard errors of the size written in."""
+    from ..estimators.diagnosis.field_selftest import COVER_Z
+
     rows = [r for r in res["rows"] if r["navigation"] == navigation]
     files = list(dict.fromkeys(r["file"] for r in rows))
     clean = {r["file"]: r for r in rows if r["error"] == "clean"}
@@ -203,12 +205,20 @@ def limits_paragraph(res: dict, navigation: str = "random_walk") -> str:
     def listed(rs):
         return "; ".join(f"{r['file'].split('.')[0]} {r['error']} {r['size']:g}" for r in rs) or "none"
 
+    named = [r for r in injected if r["hit"] and r.get("estimate_z") is not None]
+    off = [r for r in named if r["estimate_z"] > COVER_Z]
+    covered = (f" Of the {len(named)} named with a standard error, {len(named) - len(off)} estimates lie within "
+               f"{COVER_Z:g} standard errors of the size written in; beyond: "
+               + ("; ".join(f"{r['file'].split('.')[0]} {r['error']} {r['size']:g} ({r['estimate_z']:.1f} SE)" for r in off)
+                  or "none") + ".") if named else ""
     return (f"Limits of the clean files ({', '.join(f.split('.')[0] for f in files)}; the error's unit): "
             + "; ".join(parts) + f". Of the {len(missed)} misses, {len(under)} are under their file's limit ("
-            + listed(under) + f"); above it: {listed(above)}.")
+            + listed(under) + f"); above it: {listed(above)}." + covered)
 
 
 def print_diagnosis(res: dict) -> None:
+    from ..estimators.diagnosis.field_selftest import COVER_Z
+
     print("\ndiagnosis on real files, field errors injected on the recorded channels, clean file's calibration")
     for nav, s in res["summary"].items():
         print(f"  {nav:>11s}: top-1 {100 * (s['top1'] or 0):.0f} % ({100 * (s['top1_detectable'] or 0):.0f} % of the "
@@ -218,6 +228,10 @@ def print_diagnosis(res: dict) -> None:
             limits = ", ".join(f"{f.split('.')[0]} {'-' if x is None else f'{x:.3g}'}" for f, x in s["limits"].get(e, {}).items())
             print(f"      {e:>22s}: top-1 {100 * v['top1']:.0f} %, smallest detected {v['smallest_detected']}; "
                   f"detection limits {limits}")
+        c = s.get("covered") or {}
+        if c.get("named_with_se"):
+            print(f"      named with a standard error: {c['within']} of {c['named_with_se']} estimates within {COVER_Z:g} SE "
+                  f"of the size written in (the farthest {c['max_z']:.1f} SE off)")
         print("      clean gaps: " + ", ".join(f"{f} {g:.3f}" for f, g in s["clean_gaps"].items()))
         for f, own in s.get("own_effects", {}).items():
             print(f"      {f}: its own {', '.join(own)} (found on top of its calibration, held in every run's diagnosis, "

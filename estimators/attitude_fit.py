@@ -277,7 +277,20 @@ def share_above_half_nyquist(time_s, ypr_rad) -> np.ndarray:
     return np.where(total > 0, power[2 * np.pi * f > 0.5 * np.pi / dt].sum(axis=0) / np.where(total > 0, total, 1), 0.0)
 
 
-def sampled_attitude(case: Case, fit: AttitudeFit | None = None):
+def undersampled_axes(case: Case) -> dict:
+    """The axes (name -> share) with most of their variance (:data:`UNDERSAMPLED_SHARE`) above half
+    the complete samples' Nyquist frequency: motion the sensor samples too sparsely to follow
+    between samples, so that a delay of a whole sample interval fits nearly as well as none."""
+    a = case.attitude
+    ypr = a.ypr()
+    ok = np.all(np.isfinite(ypr), axis=1)
+    if ok.sum() < MIN_SPLINE_SAMPLES:
+        return {}
+    share = share_above_half_nyquist(a.time_s[ok], ypr[ok])
+    return {n: float(v) for n, v in zip(("heading", "pitch", "roll"), share) if v > UNDERSAMPLED_SHARE}
+
+
+def sampled_attitude(case: Case, fit: AttitudeFit | None = None, interpolation: str | None = None):
     """The sensor's complete samples as the attitude (:class:`~adcpdyn.models.motion.SampledAttitude`),
     smoothed within the motion band of the pre-fit's modes: one recipe for the calibration, the
     corrections and the diagnosis, so that all three put the same attitude in the beams. Where an
@@ -285,7 +298,8 @@ def sampled_attitude(case: Case, fit: AttitudeFit | None = None):
     frequency, the sensor samples the motion too sparsely for the spline's band, whose penalty cuts
     into the motion (winriver01, 1.31-s samples: 94 % of its roll variance there, the spline 0.30 deg
     rms off its roll samples; the beams fit linear segments far better, log-likelihood -3628 against
-    -3813): the samples are then joined linearly."""
+    -3813): the samples are then joined linearly. ``interpolation`` (a calibration's, as its runs
+    joined the same sensor's samples) takes the place of that choice."""
     from ..models.motion import SampledAttitude
 
     fit = fit or fit_attitude(case)
@@ -294,11 +308,13 @@ def sampled_attitude(case: Case, fit: AttitudeFit | None = None):
     ok = np.all(np.isfinite(ypr), axis=1)
     modes = np.asarray(fit.params.modes)
     band = float(np.max(modes[:, 0])) if modes.size else None
-    if ok.sum() < MIN_SPLINE_SAMPLES:
-        return SampledAttitude(a.time_s[ok], ypr[ok], band_rad_s=band)
-    share = share_above_half_nyquist(a.time_s[ok], ypr[ok])
-    if np.any(share > UNDERSAMPLED_SHARE):
-        fast = ", ".join(f"{n} {100 * v:.0f} %" for n, v in zip(("heading", "pitch", "roll"), share) if v > UNDERSAMPLED_SHARE)
+    if interpolation is not None:
+        return SampledAttitude(a.time_s[ok], ypr[ok], interpolation=interpolation, band_rad_s=band,
+                               reason=("joined linearly" if interpolation == "linear" else "smoothed within the motion band")
+                               + ", as the calibration's runs")
+    fast = undersampled_axes(case)
+    if fast:
+        fast = ", ".join(f"{n} {100 * v:.0f} %" for n, v in fast.items())
         return SampledAttitude(a.time_s[ok], ypr[ok], interpolation="linear", band_rad_s=band,
                                reason=f"joined linearly: the samples' variance lies above half their Nyquist frequency "
                                       f"({fast}), where a smoothing spline would cut into the motion")

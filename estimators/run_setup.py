@@ -102,6 +102,7 @@ class RunSetup:
     sample_tilt_lead_s: float = 0.0  # and their tilts low-pass-inverted with this tau (a tilt low-pass' current estimate)
     reference_shift_s: float = 0.0  # reference rows take the navigation at t - shift (a reference latency's current estimate)
     navigation: str = "knots"
+    sample_interpolation: str | None = None  # a calibration's way of joining the samples; None: from the data
     samples: SampledAttitude | None = field(default=None, init=False)
     reference_rows: np.ndarray | None = field(default=None, init=False)
     depth_from_ranges: bool = field(default=False, init=False)  # the case's depth is its ranges' (:meth:`Case.depth_from_ranges`)
@@ -132,7 +133,7 @@ class RunSetup:
         self.reference_rows = reference_rows(self.case, self.knots)
         self.depth_from_ranges = self.case.depth_from_ranges()
         if self.attitude_source == "samples":
-            self.samples = sampled_attitude(self.case, self.fit)
+            self.samples = sampled_attitude(self.case, self.fit, self.sample_interpolation)
 
     def at_delays(self, **delays: float) -> "RunSetup":
         """This run with other current estimates of its delays (``sample_shift_s``, ``sample_tilt_lead_s``,

@@ -217,3 +217,54 @@ def test_samples_too_sparse_for_the_motion_are_joined_linearly_not_smoothed_away
     spline = SampledAttitude(sparse.time_s, sparse.ypr(), band_rad_s=chosen.band_rad_s)
     assert np.allclose(at(chosen), truth, atol=1e-12)  # the samples, where the beams ping
     assert np.sqrt(np.mean((at(spline)[:, 2] - truth[:, 2]) ** 2)) > 0.02 * np.std(truth[:, 2])  # cut into the motion
+
+
+def test_runs_corrected_or_diagnosed_with_a_calibration_join_the_samples_as_its_runs_did():
+    """How the samples are joined is the sensor's sampling against the boat's motion: a calibration
+    records it per run (CALIB.json runs[i].attitude_interpolation) and the runs corrected or
+    diagnosed with it take it, whatever their own samples would choose (an injected tilt low-pass
+    takes the fast content out and would turn winriver01's straight segments back into a spline);
+    runs that disagree, or a file without it, leave the choice to the data."""
+    from adcpdyn.estimators.diagnosis.base import base_from
+    from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
+
+    sc = get_scenario("deep_ship")
+    case = simulate(noise_free(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=60.0))), seed=3)
+    t = case.truth
+    calib = {"radius_vectors_m": t.radius_vectors_m.tolist(), "installation_ypr_rad": t.installation_ypr_rad.tolist(),
+             "attitude_source": "samples"}
+    run = lambda name, how: {"case": name, "attitude_source": "samples", "attitude_interpolation": how}
+    linear = CalibrationRecord.from_dict({**calib, "runs": [run(case.name, "linear")]})
+    mixed = CalibrationRecord.from_dict({**calib, "runs": [run(case.name, "linear"), run("other", "spline")]})
+    assert linear.sample_interpolation() == "linear" and mixed.sample_interpolation() is None
+    assert CalibrationRecord.from_dict(calib).sample_interpolation() is None
+    assert linear.applied_to(case, case.attitude.frame, dynamic=True).attitude_interpolation == "linear"
+    config = DiagnosisConfig(attitude="samples")
+    held = base_from([case], config, linear).runs[0].samples
+    assert held.interpolation == "linear" and held.reason == "joined linearly, as the calibration's runs"
+    assert base_from([case], config, mixed).runs[0].samples.interpolation == "spline"  # these samples resolve the motion
+    segments = dynamic_correction(case, "adc", linear)
+    spline = dynamic_correction(case, "adc", CalibrationRecord.from_dict({**calib, "runs": [run(case.name, "spline")]}))
+    assert not np.allclose(segments.vessel_velocity_m_s, spline.vessel_velocity_m_s, atol=1e-6, equal_nan=True)
+
+
+def test_an_attitude_latency_on_samples_too_sparse_for_the_motion_says_it_is_told_only_modulo_a_sample():
+    """A delay of the attitude samples is told only up to whole sample intervals where most of an
+    axis' variance lies above half their Nyquist frequency (winriver01's injected 0.3 and 1.0 s read
+    1.3 s off): the diagnosis says so beside a named attitude_latency, with the interval; not on
+    samples that resolve the motion, and not beside other effects."""
+    from types import SimpleNamespace
+
+    from adcpdyn.estimators.diagnosis.statement import reading_of
+
+    sc = get_scenario("deep_ship")
+    case = simulate(noise_free(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=120.0))), seed=3)
+    a = case.attitude
+    sparse = dataclasses.replace(case, attitude=dataclasses.replace(
+        a, **{f: getattr(a, f)[::8] for f in ("time_s", "heading_rad", "pitch_rad", "roll_rad")}))
+    latency = SimpleNamespace(effect="attitude_latency", params={}, params_se={})
+    said = reading_of(latency, [sparse])["aliased"]
+    assert said["sample_interval_s"] == pytest.approx(np.median(np.diff(a.time_s[::8])), rel=1e-9)
+    assert "roll" in said["axes"] and f"{said['sample_interval_s']:.2f} s" in said["text"]
+    assert reading_of(latency, [case]) == {}
+    assert reading_of(SimpleNamespace(effect="heave", params={}, params_se={}), [sparse]) == {}

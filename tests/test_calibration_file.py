@@ -105,6 +105,8 @@ BAD = {  # variant: (edit, the key the one-line error must name)
     "run without case": (_set(["runs"], [{"moving_bed_velocity_m_s": [0, 0]}]), "runs[0].case"),
     "run moving bed string": (_set(["runs"], [{"case": "a", "moving_bed_velocity_m_s": "slow"}]),
                               "runs[0].moving_bed_velocity_m_s"),
+    "run attitude interpolation cubic": (_set(["runs"], [{"case": "a", "attitude_interpolation": "cubic"}]),
+                                         "runs[0].attitude_interpolation"),
     "own effect not in the catalog": (_own(_set(["own_effects", "effects", 1], "salinity")), "own_effects.effects"),
     "own effect without its unknowns": (_own(_set(["own_effects", "effects"], ["compass_deviation", "sound_speed_error",
                                                                               "heave"])), "own_effects.unknowns"),

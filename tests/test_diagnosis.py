@@ -852,3 +852,32 @@ def test_the_delay_profiles_curvature_is_its_envelopes_not_its_ripples():
     near = sorted(d for d in marginal if abs(d - grid_best) <= 2 * step)
     assert np.polyfit(np.array(near) - grid_best, [marginal[d] for d in near], 2)[0] > 0  # every point: curves up
     assert envelope_parabola({0.0: 1.0, step / 2: 2.0, step: 0.5}, 0.0, step) == (0.0, 0.0)  # two on the grid
+
+
+def test_an_injected_errors_estimate_is_checked_against_what_was_written_in():
+    """The field self-test's check of an estimate: each unknown's injected value (a compass offset
+    of 2 deg is A = 2 deg in radians, a sound speed +3 % is relative_error -0.03, a bed 0.2 m/s across
+    the mean course to its left), the largest |estimate - injected| / SE, None where an SE is not
+    finite (held at a bound); the coverage counts the named rows within 2 SE."""
+    from adcpdyn.estimators.diagnosis.field_errors import estimate_z, injected_values
+    from adcpdyn.estimators.diagnosis.field_selftest import coverage
+
+    case = simulate(short_scenario(30.0), seed=3)
+    assert injected_values(case, "compass_offset_deg", 2.0) == {"A_rad": pytest.approx(np.radians(2.0))}
+    assert injected_values(case, "sound_speed_relative", 0.03) == {"relative_error": pytest.approx(-0.03)}
+    assert injected_values(case, "heave_m_s", 0.1) == {}
+    v = case.reference.velocity_m_s
+    course = np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0]))
+    bed = injected_values(case, "moving_bed_m_s", 0.2)
+    u = np.array([bed["velocity_north_m_s"], bed["velocity_east_m_s"]])
+    assert np.linalg.norm(u) == pytest.approx(0.2)
+    assert np.dot(u, [np.cos(course), np.sin(course)]) == pytest.approx(0.0, abs=1e-12)  # across the course
+    assert np.cos(course) * u[1] - np.sin(course) * u[0] < 0  # to its left (north-east axes: clockwise positive)
+    est = {"moving_bed.velocity_north_m_s": u[0] + 0.03, "moving_bed.velocity_east_m_s": u[1] - 0.01}
+    assert estimate_z(est, {k: 0.01 for k in est}, bed) == pytest.approx(3.0)
+    assert estimate_z(est, {**{k: 0.01 for k in est}, "moving_bed.velocity_east_m_s": float("nan")}, bed) is None
+    assert estimate_z(None, None, bed) is None
+    rows = [{"error": "compass_offset_deg", "hit": True, "estimate_z": 1.5}, {"error": "heave_m_s", "hit": True},
+            {"error": "moving_bed_m_s", "hit": True, "estimate_z": 3.0}, {"error": "sound_speed_relative", "hit": False,
+                                                                          "estimate_z": 9.0}]
+    assert coverage(rows) == {"named_with_se": 2, "within": 1, "max_z": 3.0}

@@ -149,7 +149,8 @@ def _runs(value, path, fail):
             fail(p, 'expected an object {"case": ..., ...}', _show(run))
         _check(Key("string", nulls=NONE), _member(run, "case", p, fail), f"{p}.case", fail)
         for k in ("moving_bed_velocity_m_s", "moving_bed_velocity_se_m_s", "attitude_model", "attitude_source",
-                  "velocity_model", "transducer_depth_offset_m", "transducer_depth_offset_se_m", "navigation"):
+                  "velocity_model", "transducer_depth_offset_m", "transducer_depth_offset_se_m", "navigation",
+                  "attitude_interpolation"):
             if k in run:
                 _check(KEYS[k], run[k], f"{p}.{k}", fail)
 
@@ -213,6 +214,7 @@ KEYS: dict[str, Key] = {
     "transducer_depth_offset_se_m": Key("number", low=0.0, unit="m"),
     "attitude_source_reason": Key("string"),
     "navigation": Key("string", choices=("knots", "random_walk")),  # per run (runs[i])
+    "attitude_interpolation": Key("string", choices=("spline", "linear")),  # per run (runs[i]); null: a motion model
     "attitude_model": Key("object", check=_attitude_model),
     "velocity_model": Key("object", check=_velocity_model),
     "config": Key("object", check=_config),

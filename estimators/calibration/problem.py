@@ -708,6 +708,7 @@ class CalibrationProblem:
                 heading_deg=(float(np.rad2deg(mean) % 360), float(np.rad2deg(sd))),
                 velocity_knots_s=knots, velocity_knots_m_s=vk, transducer_depth_offset_m=depth[0],
                 transducer_depth_offset_se_m=depth[1], navigation=run.navigation,
+                attitude_interpolation=run.samples.interpolation if run.attitude_source == "samples" else None,
                 attitude=run.fit.params if run.attitude_source != "model" else
                 AttitudeParams.unpack(x[u.index(f"attitude{k}")], run.fit.params.layout)))
         return out

@@ -87,6 +87,7 @@ class RunRecord:
     chi2_per_channel: dict
     transducer_depth_offset_se_m: float | None = None
     navigation: str | None = None  # "knots" | "random_walk"; None in files older than it
+    attitude_interpolation: str | None = None  # the samples' "spline" | "linear"; None: a model or an older file
 
 
 @dataclass(frozen=True, eq=False)
@@ -233,7 +234,7 @@ class CalibrationRecord:
             transducer_depth_offset_m=_float_or_none(r.get("transducer_depth_offset_m")),
             transducer_depth_offset_se_m=_float_or_none(r.get("transducer_depth_offset_se_m")),
             noise_sigma=dict(r.get("noise_sigma") or {}), chi2_per_channel=dict(r.get("chi2_per_channel") or {}),
-            navigation=r.get("navigation"),
+            navigation=r.get("navigation"), attitude_interpolation=r.get("attitude_interpolation"),
         ) for r in c.get("runs") or [])
         solver = c.get("solver") or {}
         return cls(
@@ -381,7 +382,15 @@ class CalibrationRecord:
             magnetic_declination_rad=self.magnetic_declination_rad, compass_error_rad=self.compass_error_rad,
             nominal_installation_ypr_rad=self.nominal_installation_ypr_rad, attitude_source=self.attitude_source,
             transducer_depth_offset_m=None if own is None else own.transducer_depth_offset_m, moving_bed_m_s=bed,
-            moving_bed_source=source)
+            moving_bed_source=source, attitude_interpolation=self.sample_interpolation())
+
+    def sample_interpolation(self) -> str | None:
+        """How the calibration's runs joined the sensor's samples (``spline`` or ``linear``) where they
+        all agree, None where none recorded it or they differ: a property of the sensor's sampling
+        against the boat's motion, so runs corrected or diagnosed with this calibration take it too
+        (a diagnosis's injected tilt low-pass must not change the recipe the calibration used)."""
+        used = {r.attitude_interpolation for r in self.runs if r.attitude_interpolation is not None}
+        return used.pop() if len(used) == 1 else None
 
     def compass_deviation_applied(self) -> tuple[float, float, float, float]:
         """(B, C, mean_sin, mean_cos) of the one-cycle compass deviation a head sensor's headings are
@@ -421,6 +430,8 @@ class AppliedCalibration:
         The run's depth offset found from the slant ranges (None or 0: none).
     moving_bed_m_s : ndarray (2,) or None
         The bed under the run (:meth:`CalibrationRecord.moving_bed_for`) and ``moving_bed_source``.
+    attitude_interpolation : str or None
+        How the calibration's runs joined the attitude samples (:meth:`CalibrationRecord.sample_interpolation`).
     """
 
     lever_arms_sensor_m: np.ndarray | None
@@ -438,6 +449,7 @@ class AppliedCalibration:
     transducer_depth_offset_m: float | None
     moving_bed_m_s: np.ndarray | None
     moving_bed_source: str
+    attitude_interpolation: str | None = None
 
 
 def as_record(calibration) -> CalibrationRecord | None:

@@ -70,6 +70,7 @@ class RunResult:
     velocity_knots_s: np.ndarray | None = None
     velocity_knots_m_s: np.ndarray | None = None
     navigation: str | None = None  # the run's vessel velocity: "knots" or "random_walk"
+    attitude_interpolation: str | None = None  # the samples' ("spline" or "linear"); None with a motion model
 
     def to_dict(self) -> dict:
         bed, se = self.moving_bed_velocity_m_s, self.moving_bed_velocity_se_m_s
@@ -85,6 +86,7 @@ class RunResult:
             "attitude_source_reason": self.attitude_source_reason,
             "timing": self.timing,
             "navigation": self.navigation,
+            "attitude_interpolation": self.attitude_interpolation,
             "heading_deg": {"mean": self.heading_deg[0], "circular_sd": self.heading_deg[1]},
             "transducer_depth_offset_m": (self.transducer_depth_offset_m if self.transducer_depth_offset_se_m is not None
                                           and np.isfinite(self.transducer_depth_offset_se_m) else None),

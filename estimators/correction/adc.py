@@ -251,7 +251,7 @@ def dynamic_correction(case: Case, method: str = "adc", calibration: Calibration
         case = with_heading_misalignment(case, calibration)
         lever, ypr_st = calibration.lever_arms_sensor_m, calibration.beam_installation_ypr_rad
         if attitude is None and calibration.attitude_source == "samples":  # as the calibration's beams
-            attitude = sampled_attitude(case)
+            attitude = sampled_attitude(case, interpolation=calibration.attitude_interpolation)
         attitude = attitude or fit_attitude(case).params
     tangential = "paper_literal" if method == "paper_literal" else "consistent"
     if method in ("rootfinder", "oracle"):

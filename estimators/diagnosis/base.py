@@ -82,7 +82,8 @@ def base_from(cases: list, config: DiagnosisConfig, calibration: CalibrationReco
         navigation = choose_navigation(case, source, config.navigation, irregular_attitude(af))
         knots = ping_knots(case) if navigation == "random_walk" else knot_times(case, None)
         runs.append(RunSetup(case, af, source, timing, knots, case.pings.bt_range_m is not None, reason,
-                             navigation=navigation))
+                             navigation=navigation,
+                             sample_interpolation=None if calibration is None else calibration.sample_interpolation()))
     head = runs[0].case.attitude.frame == "transducer"
     moving = any(r.moving_reference for r in runs)
     v = cases[0].vessel

@@ -58,6 +58,35 @@ def detection_limit(error: str, limits: dict) -> float | None:
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 
 
+def injected_values(cases, error: str, size: float) -> dict:
+    """What an injection of ``size`` puts into its catalog effect's unknowns (their last name ->
+    value), to check an estimate and its standard error against: each unknown's change per unit
+    of the error (:data:`ERROR_UNKNOWNS`), the bed across the survey's mean course; empty for an
+    error whose effect has no such values (heave: its frequency is the effect's own)."""
+    names, per_unit, _ = ERROR_UNKNOWNS.get(error, ((), None, False))
+    if error == "moving_bed_m_s":
+        return dict(zip(names, (float(v) for v in size * _across(survey_course(cases)))))
+    return {} if per_unit is None else {n: float(size * p) for n, p in zip(names, per_unit)}
+
+
+def estimate_z(estimate: dict | None, se: dict | None, injected: dict) -> float | None:
+    """The largest |estimate - injected| / SE over the effect's unknowns (full names ending in the
+    injected ones' last names); None without an estimate, or where an unknown has no finite,
+    positive standard error (held at a bound)."""
+    if not estimate or not se or not injected:
+        return None
+    z = []
+    for name, value in estimate.items():
+        last = name.rsplit(".", 1)[-1]
+        if last not in injected:
+            continue
+        s = se.get(name)
+        if s is None or not np.isfinite(s) or s <= 0 or value is None:
+            return None
+        z.append(abs(value - injected[last]) / s)
+    return float(max(z)) if z else None
+
+
 def _across(course_rad: float) -> np.ndarray:
     """The horizontal unit vector (north, east) across ``course_rad`` to its left: where an
     injected bed moves."""

@@ -17,7 +17,7 @@ from ..calibration.record import CalibrationRecord
 from .config import DiagnosisConfig, holding
 from .diagnose import calibration_own_effects, diagnose
 from ..run_setup import has_moving_reference
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, inject_survey
+from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, estimate_z, inject_survey, injected_values
 from .own_effects import find_own_effects
 from .signal_limit import own_delay_profile, signal_limit
 
@@ -63,6 +63,9 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
                "shrink": mine["shrink_fraction"] if mine else None, "estimate": mine["params"] if mine else None,
                "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
                "seconds": seconds, "statement": r.statement}
+        if error != "clean":  # the estimate against what was written in (on top of the file's own values)
+            row["injected"] = injected_values(runs, error, size)
+            row["estimate_z"] = estimate_z(row["estimate"], row["se"], row["injected"])
         if error == "clean":
             # the file's detection limits, before anything is injected: what each error's effect would need on
             # top of the file's own (a given effect's: its moving from its values)
@@ -144,6 +147,16 @@ def outcome(row: dict, mine: dict | None, result, min_gap: float = 0.1) -> str:
     return f"outscored by {row['verdict'].split('+')[0]} ({detail})"
 
 
+COVER_Z = 2.0  # an estimate within this many standard errors of the injected value covers it
+
+
+def coverage(rows: list) -> dict:
+    """Of the injected rows whose error was named with a standard error: how many estimates lie within
+    :data:`COVER_Z` standard errors of what was injected, and the largest |z|."""
+    z = [r["estimate_z"] for r in rows if r["error"] != "clean" and r["hit"] and r.get("estimate_z") is not None]
+    return {"named_with_se": len(z), "within": int(sum(v <= COVER_Z for v in z)), "max_z": max(z, default=None)}
+
+
 def summarise(rows: list) -> dict:
     per = {}
     for r in rows:
@@ -161,6 +174,8 @@ def summarise(rows: list) -> dict:
         "top1_detectable": float(np.mean([r["hit"] for r in detectable])) if detectable else None,
         "n_detectable": len(detectable), "n_injected": len(injected),
         "clean_verdict": clean[0]["verdict"] if clean else None,
+        # the named errors' estimates against the sizes written in: how many lie within 2 standard errors
+        "covered": coverage(injected),
         "per_error": {e: {"top1": float(np.mean([r["hit"] for r in rs])),
                           "smallest_detected": min([r["size"] for r in rs if r["hit"]], default=None),
                           # one file's limit (rows of several files, a bench, have several: None here)
@@ -171,13 +186,19 @@ def summarise(rows: list) -> dict:
     }
 
 
+def _z(row: dict) -> str:
+    return "" if row.get("estimate_z") is None else f"{row['estimate_z']:.1f}"
+
+
 def format_field_selftest(res: dict) -> str:
     """The self-test as a Markdown table and a summary line."""
-    lines = ["| error | size | verdict | named | why | shrink | gap (z) | s |", "|---|---:|---|---|---|---:|---:|---:|"]
+    lines = ["| error | size | verdict | named | why | shrink | estimate off by (SE) | gap (z) | s |",
+             "|---|---:|---|---|---|---:|---:|---:|---:|"]
     for r in res["rows"]:
         shrink = "" if r["shrink"] is None else f"{100 * r['shrink']:.0f} %"
         lines.append(f"| {r['error']} | {r['size']:g} {r['unit']} | {r['verdict']} | {'yes' if r['hit'] else 'no'} | "
-                     f"{r.get('outcome', '')} | {shrink} | {r['gap']:.3f} ({r['gap_z']:.1f}) | {r['seconds']:.0f} |")
+                     f"{r.get('outcome', '')} | {shrink} | {_z(r)} | "
+                     f"{r['gap']:.3f} ({r['gap_z']:.1f}) | {r['seconds']:.0f} |")
     s = res["summary"]
     own = res.get("own_effects") or []
     if own:
@@ -189,6 +210,10 @@ def format_field_selftest(res: dict) -> str:
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
                  f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} not under the "
                  f"file's detection limit: {100 * (s['top1_detectable'] or 0):.0f} %")
+    c = s.get("covered") or {}
+    if c.get("named_with_se"):
+        lines.append(f"named errors whose estimate lies within {COVER_Z:g} standard errors of the size written in: "
+                     f"{c['within']} of {c['named_with_se']} (the farthest {c['max_z']:.1f} SE off)")
     for e, v in s["per_error"].items():
         smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}"
         limit = "unknown" if v.get("detection_limit") is None else \

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..attitude_fit import undersampled_axes
 from .model import DiagnosisBase, GapModel
 from .readings import sound_speed_reading
 from .selection import EffectScore
@@ -72,9 +73,22 @@ def not_the_base(model: GapModel) -> str:
 
 
 def reading_of(score: EffectScore, cases: list) -> dict:
-    """``{"reading": ...}``: a sound-speed error's estimate in the field's terms
+    """``{"reading": {..., "text"}}``: a sound-speed error's estimate in the field's terms
     (:func:`.readings.sound_speed_reading`: the water's sound speed, and the salinity that gives it at
-    the recorded temperature); empty for other effects."""
+    the recorded temperature); ``{"aliased": {..., "text"}}``: an attitude latency on samples too
+    sparse for the motion, where delays whole sample intervals apart fit nearly alike (winriver01's
+    injected 0.3 and 1.0 s read -0.98 and -0.27 s, 1.3 s off); empty for other effects."""
+    if score.effect == "attitude_latency":
+        fast = [(c, undersampled_axes(c)) for c in cases]
+        fast = [(c, f) for c, f in fast if f]
+        if not fast:
+            return {}
+        dt = max(float(np.median(np.diff(c.attitude.time_s))) for c, _ in fast)
+        axes = ", ".join(dict.fromkeys(n for _, f in fast for n in f))
+        return {"aliased": {"sample_interval_s": dt, "axes": axes,
+                            "text": f"the attitude samples ({dt:.2f} s apart) are too sparse for the motion ({axes}: most "
+                                    f"of its variance above half their Nyquist frequency), so delays whole sample intervals "
+                                    f"apart fit nearly alike: this one may be off by a multiple of {dt:.2f} s"}}
     key = "sound_speed_error.relative_error"
     if score.effect != "sound_speed_error" or key not in score.params:
         return {}
