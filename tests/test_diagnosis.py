@@ -877,6 +877,8 @@ def test_an_injected_errors_estimate_is_checked_against_what_was_written_in():
     assert estimate_z(est, {k: 0.01 for k in est}, bed) == pytest.approx(3.0)
     assert estimate_z(est, {**{k: 0.01 for k in est}, "moving_bed.velocity_east_m_s": float("nan")}, bed) is None
     assert estimate_z(None, None, bed) is None
+    own = {"moving_bed.velocity_north_m_s": 0.03}  # the file's own bed, held, the estimate named as moved from it
+    assert estimate_z(est, {k: 0.01 for k in est}, bed, own) == pytest.approx(1.0)
     rows = [{"error": "compass_offset_deg", "hit": True, "estimate_z": 1.5}, {"error": "heave_m_s", "hit": True},
             {"error": "moving_bed_m_s", "hit": True, "estimate_z": 3.0}, {"error": "sound_speed_relative", "hit": False,
                                                                           "estimate_z": 9.0}]

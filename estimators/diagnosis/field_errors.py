@@ -69,10 +69,11 @@ def injected_values(cases, error: str, size: float) -> dict:
     return {} if per_unit is None else {n: float(size * p) for n, p in zip(names, per_unit)}
 
 
-def estimate_z(estimate: dict | None, se: dict | None, injected: dict) -> float | None:
-    """The largest |estimate - injected| / SE over the effect's unknowns (full names ending in the
-    injected ones' last names); None without an estimate, or where an unknown has no finite,
-    positive standard error (held at a bound)."""
+def estimate_z(estimate: dict | None, se: dict | None, injected: dict, own: dict | None = None) -> float | None:
+    """The largest |estimate - (own + injected)| / SE over the effect's unknowns (full names ending
+    in the injected ones' last names; ``own``: full name -> the file's own value, held under the
+    injection and named as moved from it); None without an estimate, or where an unknown has no
+    finite, positive standard error (held at a bound)."""
     if not estimate or not se or not injected:
         return None
     z = []
@@ -83,7 +84,7 @@ def estimate_z(estimate: dict | None, se: dict | None, injected: dict) -> float 
         s = se.get(name)
         if s is None or not np.isfinite(s) or s <= 0 or value is None:
             return None
-        z.append(abs(value - injected[last]) / s)
+        z.append(abs(value - (own or {}).get(name, 0.0) - injected[last]) / s)
     return float(max(z)) if z else None
 
 

@@ -65,7 +65,8 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
                "seconds": seconds, "statement": r.statement}
         if error != "clean":  # the estimate against what was written in (on top of the file's own values)
             row["injected"] = injected_values(runs, error, size)
-            row["estimate_z"] = estimate_z(row["estimate"], row["se"], row["injected"])
+            row["estimate_z"] = estimate_z(row["estimate"], row["se"], row["injected"],
+                                           {n: v.get("value") or 0.0 for n, v in own["unknowns"].items()})
         if error == "clean":
             # the file's detection limits, before anything is injected: what each error's effect would need on
             # top of the file's own (a given effect's: its moving from its values)
