@@ -446,3 +446,29 @@ def test_calibrate_says_what_the_run_shows_of_its_own_in_its_units():
                              "statement": "compass_offset explains the gap; " + note + " [base: pinned]"})
     assert "compass_offset (A +5.73 deg ± 1.1 deg); sound_speed_error (relative_error +0.022 ± n/a)" in line
     assert line.endswith(f"({note})")
+
+
+def test_the_field_selftest_prints_a_table_within_the_width_and_why_each_error_was_missed():
+    """``diagnose --field-selftest`` on a terminal: no line wider than TABLE_WIDTH however long the
+    verdicts and reasons, the reasons beneath the table for the errors not named, sizes without a
+    unit printed without a trailing space; the .md keeps the reasons in a column."""
+    from adcpdyn.estimators.diagnosis.field_selftest import format_field_selftest, summarise, terminal_field_selftest
+    from adcpdyn.text import TABLE_WIDTH
+
+    def row(error, size, unit, verdict, hit, outcome, z=None):
+        return {"error": error, "size": size, "unit": unit, "verdict": verdict, "hit": hit, "shrink": 0.5 if hit else None,
+                "estimate_z": z, "gap": 0.1234, "gap_z": 12.5, "seconds": 5.2, "outcome": outcome}
+
+    long = "under the file's detection limit (0.3 < 0.496 s; BIC change +49, shrink -96 %, held-out z -0.3) " * 2
+    rows = [row("clean", 0.0, "", "none", True, "clean"),
+            row("compass_offset_deg", 4.0, "deg", "compass_offset+attitude_latency+heave+moving_bed", True, "named", 1.2),
+            row("attitude_latency_s", 0.3, "s", "none", False, long.strip()),
+            row("sound_speed_relative", 0.04, "", "moving_bed", False, "outscored by moving_bed")]
+    res = {"rows": rows, "summary": summarise(rows), "navigation": "random_walk"}
+    out = terminal_field_selftest(res)
+    assert max(len(line) for line in out.splitlines()) <= TABLE_WIDTH
+    assert "- attitude_latency_s 0.3 s: under the file's detection limit" in out
+    assert "- sound_speed_relative 0.04: outscored by moving_bed" in out
+    assert "compass_offset_deg 4 deg: " not in out  # named: no reason listed
+    md = format_field_selftest(res)
+    assert "| attitude_latency_s | 0.3 s | none | no | under the file's" in md and "| 0.04 | moving_bed |" in md

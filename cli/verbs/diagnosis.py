@@ -66,7 +66,7 @@ def _diagnosis_paths(args, usage: str, joint: str) -> list:
 
 def _diagnose_field_selftest(args) -> int:
     from ...api import field_selftest
-    from ...estimators.diagnosis.field_selftest import format_field_selftest
+    from ...estimators.diagnosis.field_selftest import terminal_field_selftest
 
     paths = _diagnosis_paths(args, "diagnose: --field-selftest expects CASE.h5 (several with --joint: a survey) and "
                              "--out SELFTEST.json", "self-test them as one survey")
@@ -76,7 +76,7 @@ def _diagnose_field_selftest(args) -> int:
                          progress=Progress("diagnose"))
     for n in res["notes"]:
         warn(n)
-    print(format_field_selftest(res))
+    print(terminal_field_selftest(res))
     print(f"wrote {args.out} and its .md and figure beside it")
     return 0
 

@@ -191,37 +191,76 @@ def _z(row: dict) -> str:
     return "" if row.get("estimate_z") is None else f"{row['estimate_z']:.1f}"
 
 
-def format_field_selftest(res: dict) -> str:
-    """The self-test as a Markdown table and a summary line."""
-    lines = ["| error | size | verdict | named | why | shrink | estimate off by (SE) | gap (z) | s |",
-             "|---|---:|---|---|---|---:|---:|---:|---:|"]
-    for r in res["rows"]:
-        shrink = "" if r["shrink"] is None else f"{100 * r['shrink']:.0f} %"
-        lines.append(f"| {r['error']} | {r['size']:g} {r['unit']} | {r['verdict']} | {'yes' if r['hit'] else 'no'} | "
-                     f"{r.get('outcome', '')} | {shrink} | {_z(r)} | "
-                     f"{r['gap']:.3f} ({r['gap_z']:.1f}) | {r['seconds']:.0f} |")
+def _size(row: dict) -> str:
+    return f"{row['size']:g} {row['unit']}".strip()
+
+
+def _summary_lines(res: dict) -> list:
+    """The own effects held, the summary, the estimates' check and each error's line, as sentences."""
     s = res["summary"]
+    lines = []
     own = res.get("own_effects") or []
     if own:
-        lines.append("")
-        lines.append(f"The file's own effects ({', '.join(own)}; {res.get('own_effects_from', 'found here')}) are held at "
-                     "their values in every run's model, as a diagnosis of the calibration's own runs holds them: the "
-                     "verdicts are what changed on top of them (a given effect named: it moved from its values).")
-    lines.append("")
+        lines += [f"The file's own effects ({', '.join(own)}; {res.get('own_effects_from', 'found here')}) are held at "
+                  "their values in every run's model, as a diagnosis of the calibration's own runs holds them: the "
+                  "verdicts are what changed on top of them (a given effect named: it moved from its values).", ""]
     lines.append(f"navigation {res['navigation']}; clean file: {s['clean_verdict']}; top-1 over the injected errors: "
                  f"{100 * (s['top1'] or 0):.0f} %; over the {s['n_detectable']} of {s['n_injected']} not under the "
                  f"file's detection limit: {100 * (s['top1_detectable'] or 0):.0f} %")
     c = s.get("covered") or {}
     if c.get("named_with_se"):
-        lines.append(f"named errors whose estimate lies within {COVER_Z:g} standard errors of the size written in: "
-                     f"{c['within']} of {c['named_with_se']} (the farthest {c['max_z']:.1f} SE off)")
+        lines.append(f"named errors whose estimate lies within {COVER_Z:g} standard errors of the size written in (on "
+                     f"top of the file's own values): {c['within']} of {c['named_with_se']} (the farthest "
+                     f"{c['max_z']:.1f} SE off)")
     for e, v in s["per_error"].items():
-        smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}"
+        smallest = "none" if v["smallest_detected"] is None else f"{v['smallest_detected']:g} {v['unit']}".strip()
         limit = "unknown" if v.get("detection_limit") is None else \
-            f"{'over ' if v.get('detection_limit_beyond') else ''}{v['detection_limit']:.3g} {v['unit']}"
+            f"{'over ' if v.get('detection_limit_beyond') else ''}{v['detection_limit']:.3g} {v['unit']}".strip()
         lines.append(f"- {e}: top-1 {100 * v['top1']:.0f} %, smallest detected {smallest}, detection limit {limit}")
     for e in res.get("skipped", []):
         lines.append(f"- {e}: not tried (needs a moving reference velocity)")
+    return lines
+
+
+def format_field_selftest(res: dict) -> str:
+    """The self-test as a Markdown table and its summary (SELFTEST.md)."""
+    lines = ["| error | size | verdict | named | why | shrink | estimate off by (SE) | gap (z) | s |",
+             "|---|---:|---|---|---|---:|---:|---:|---:|"]
+    for r in res["rows"]:
+        shrink = "" if r["shrink"] is None else f"{100 * r['shrink']:.0f} %"
+        lines.append(f"| {r['error']} | {_size(r)} | {r['verdict']} | {'yes' if r['hit'] else 'no'} | "
+                     f"{r.get('outcome', '')} | {shrink} | {_z(r)} | "
+                     f"{r['gap']:.3f} ({r['gap_z']:.1f}) | {r['seconds']:.0f} |")
+    return "\n".join(lines + [""] + _summary_lines(res))
+
+
+def terminal_field_selftest(res: dict, width: int | None = None) -> str:
+    """What ``diagnose --field-selftest`` prints: the rows as a table no wider than
+    :data:`~adcpdyn.text.TABLE_WIDTH`, why each error was not named beneath it, then the summary,
+    every line wrapped to the width (the Markdown table, with the reasons in a column, is the .md)."""
+    import textwrap
+
+    from ...text import TABLE_WIDTH, Column, text_table
+
+    width = width or TABLE_WIDTH
+    rows = {f"{r['error']} {_size(r)}" if r["error"] != "clean" else "clean": r for r in res["rows"]}
+    text = {"verdict": lambda r: r["verdict"], "hit": lambda r: "yes" if r["hit"] else "no",
+            "shrink": lambda r: "" if r["shrink"] is None else f"{100 * r['shrink']:.0f}", "estimate_z": _z,
+            "gap": lambda r: f"{r['gap']:.3f}", "gap_z": lambda r: f"{r['gap_z']:.1f}",
+            "seconds": lambda r: f"{r['seconds']:.0f}"}
+    columns = [Column("verdict", "verdict", ""), Column("hit", "named", ""), Column("shrink", "shrink", "%"),
+               Column("estimate_z", "off by", "SE"), Column("gap", "gap", "chi2/n"), Column("gap_z", "gap z", ""),
+               Column("seconds", "time", "s")]
+    lines = [text_table(rows, columns, first="error, size", width=width,
+                        cell=lambda column, name, value: text[column.key](rows[name]))]
+    why = [(name, r.get("outcome", "")) for name, r in rows.items() if not r["hit"] and r.get("outcome")]
+    if why:
+        lines += ["", "not named, and why:"]
+        for name, reason in why:
+            lines += textwrap.wrap(f"- {name}: {reason}", width=width, subsequent_indent="  ")
+    lines.append("")
+    for line in _summary_lines(res):
+        lines += textwrap.wrap(line, width=width, subsequent_indent="  ") or [""]
     return "\n".join(lines)
 
 
