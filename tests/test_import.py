@@ -274,3 +274,17 @@ def test_reader_chatter_is_kept_out_of_the_terminal(tmp_path, capfd, monkeypatch
         assert code == 2 and err.count("\n") == 1
         assert "KeyError: 377" in err and "the reader reported: Ensemble starting at startpos 0" in err
         assert not (tmp_path / "x.h5").exists()
+
+
+@needs_reader
+def test_real_samples_too_sparse_for_the_roll_are_joined_linearly(imported):
+    """winriver01's 1.31-s attitude samples hold most of their roll variance above half their Nyquist
+    frequency (the roll aliased: 94 %), so its beams take straight segments; RiverPro (0.67 s) and
+    winriver02 (0.52 s) resolve their motion and keep the smoothing spline."""
+    from adcpdyn.estimators.attitude_fit import sampled_attitude, undersampled_axes
+
+    chosen = {name: sampled_attitude(imported(name)[0]) for name in
+              ("winriver01.PD0", "RiverPro_test01.PD0", "winriver02_transect.PD0")}
+    assert {n: s.interpolation for n, s in chosen.items()} == {
+        "winriver01.PD0": "linear", "RiverPro_test01.PD0": "spline", "winriver02_transect.PD0": "spline"}
+    assert list(undersampled_axes(imported("winriver01.PD0")[0])) == ["roll"]
