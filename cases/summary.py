@@ -6,6 +6,7 @@ import numpy as np
 from scipy.signal import lombscargle
 
 from ..models.janus import error_velocity
+from ..models.motion import MIN_SPLINE_SAMPLES, fast_axes
 from ..text import prose
 from .case import Case
 
@@ -94,6 +95,13 @@ def summarise(case: Case) -> str:
     heading = ypr[np.isfinite(ypr[:, 0]), 0]
     lines.append(f"  heading    {np.rad2deg(heading[0]) % 360:.1f} -> {np.rad2deg(heading[-1]) % 360:.1f} deg, "
                  f"span {np.rad2deg(np.ptp(heading)):.1f} deg")
+    complete = a.complete()
+    if complete.sum() >= MIN_SPLINE_SAMPLES:
+        fast = [f"{n} {100 * v:.0f} %" for n, v in fast_axes(a.time_s[complete], ypr[complete]).items()]
+        lines.append("  joined     " + (f"linearly where the beams take the samples: {', '.join(fast)} of the variance "
+                                        "above half their Nyquist frequency, where a smoothing spline would cut into "
+                                        "the motion" if fast else "by a smoothing spline within the motion band where "
+                                        "the beams take the samples"))
     if case.water is not None:
         d = case.water.cell_depth_m
         lines.append(f"water        {d.size} cells, {d[0]:.2f}-{d[-1]:.2f} m deep")

@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..cases.case import Case
-from ..models.motion import MIN_SPLINE_SAMPLES, AttitudeParams, mode_cs
+from ..models.motion import AttitudeParams, fast_axes, mode_cs
 from ..solvers.ping_map import PingFunction
 from .statistics.periodogram import lomb_scargle
 
@@ -258,43 +258,19 @@ def fit_attitude(case: Case, max_modes: int = 3, fixed_modes: int | None = None,
     return AttitudeFit(params, np.array([sig_heading, *sig_tilt]), order, trail)
 
 
-UNDERSAMPLED_SHARE = 0.5  # an axis with more of its variance than this above half the Nyquist frequency
-
-
-def share_above_half_nyquist(time_s, ypr_rad) -> np.ndarray:
-    """Per axis (heading unwrapped, pitch, roll), the share of the samples' variance (a cubic trend
-    removed: turns and drifts) above half their Nyquist frequency, from the periodogram at the median
-    sample interval: where the smoothing spline's band stops."""
-    from scipy.signal import periodogram
-
-    t = np.asarray(time_s, dtype=float)
-    ypr = np.asarray(ypr_rad, dtype=float).copy()
-    ypr[:, 0] = np.unwrap(ypr[:, 0])
-    dt = float(np.median(np.diff(t)))
-    cubic = lambda y: y - np.polyval(np.polyfit(t - t[0], y, 3), t - t[0])
-    f, power = periodogram(np.column_stack([cubic(ypr[:, j]) for j in range(3)]), fs=1.0 / dt, detrend=False, axis=0)
-    total = power.sum(axis=0)
-    return np.where(total > 0, power[2 * np.pi * f > 0.5 * np.pi / dt].sum(axis=0) / np.where(total > 0, total, 1), 0.0)
-
-
 def undersampled_axes(case: Case) -> dict:
-    """The axes (name -> share) with most of their variance (:data:`UNDERSAMPLED_SHARE`) above half
+    """The axes (name -> share) with most of their variance (:data:`~adcpdyn.models.motion.UNDERSAMPLED_SHARE`) above half
     the complete samples' Nyquist frequency: motion the sensor samples too sparsely to follow
     between samples, so that a delay of a whole sample interval fits nearly as well as none."""
-    a = case.attitude
-    ypr = a.ypr()
-    ok = np.all(np.isfinite(ypr), axis=1)
-    if ok.sum() < MIN_SPLINE_SAMPLES:
-        return {}
-    share = share_above_half_nyquist(a.time_s[ok], ypr[ok])
-    return {n: float(v) for n, v in zip(("heading", "pitch", "roll"), share) if v > UNDERSAMPLED_SHARE}
+    ok = case.attitude.complete()
+    return fast_axes(case.attitude.time_s[ok], case.attitude.ypr()[ok])
 
 
 def sampled_attitude(case: Case, fit: AttitudeFit | None = None, interpolation: str | None = None):
     """The sensor's complete samples as the attitude (:class:`~adcpdyn.models.motion.SampledAttitude`),
     smoothed within the motion band of the pre-fit's modes: one recipe for the calibration, the
     corrections and the diagnosis, so that all three put the same attitude in the beams. Where an
-    axis has most of its variance (:data:`UNDERSAMPLED_SHARE`) above half the samples' Nyquist
+    axis has most of its variance (:data:`~adcpdyn.models.motion.UNDERSAMPLED_SHARE`) above half the samples' Nyquist
     frequency, the sensor samples the motion too sparsely for the spline's band, whose penalty cuts
     into the motion (winriver01, 1.31-s samples: 94 % of its roll variance there, the spline 0.30 deg
     rms off its roll samples; the beams fit linear segments far better, log-likelihood -3628 against

@@ -311,6 +311,35 @@ def local_attitude_params(time_s, ypr_rad, times) -> np.ndarray:
     return np.vstack([times, at.T, slope.T, at[:, 0]])
 
 
+UNDERSAMPLED_SHARE = 0.5  # an axis with more of its variance than this above half the Nyquist frequency
+
+
+def share_above_half_nyquist(time_s, ypr_rad) -> np.ndarray:
+    """Per axis (heading unwrapped, pitch, roll), the share of the samples' variance (a cubic trend
+    removed: turns and drifts) above half their Nyquist frequency, from the periodogram at the median
+    sample interval: where the smoothing spline's band stops."""
+    from scipy.signal import periodogram
+
+    t = np.asarray(time_s, dtype=float)
+    ypr = np.asarray(ypr_rad, dtype=float).copy()
+    ypr[:, 0] = np.unwrap(ypr[:, 0])
+    dt = float(np.median(np.diff(t)))
+    cubic = lambda y: y - np.polyval(np.polyfit(t - t[0], y, 3), t - t[0])
+    f, power = periodogram(np.column_stack([cubic(ypr[:, j]) for j in range(3)]), fs=1.0 / dt, detrend=False, axis=0)
+    total = power.sum(axis=0)
+    return np.where(total > 0, power[2 * np.pi * f > 0.5 * np.pi / dt].sum(axis=0) / np.where(total > 0, total, 1), 0.0)
+
+
+def fast_axes(time_s, ypr_rad) -> dict:
+    """The axes (name -> share) of complete samples with most of their variance
+    (:data:`UNDERSAMPLED_SHARE`) above half their Nyquist frequency: motion sampled too sparsely
+    for a smoothing spline's band (empty with fewer than ``MIN_SPLINE_SAMPLES``)."""
+    if len(time_s) < MIN_SPLINE_SAMPLES:
+        return {}
+    share = share_above_half_nyquist(time_s, ypr_rad)
+    return {n: float(v) for n, v in zip(("heading", "pitch", "roll"), share) if v > UNDERSAMPLED_SHARE}
+
+
 SAMPLE_INTERPOLATIONS = ("spline", "linear")
 MIN_SPLINE_SAMPLES = 5
 BAND_RESPONSE = 0.98  # the smoothing keeps this much of the amplitude at the top of the motion band

@@ -196,7 +196,8 @@ def test_samples_too_sparse_for_the_motion_are_joined_linearly_not_smoothed_away
     cuts into the motion and departs from the noise-free samples where the beams ping, so the samples
     are joined linearly and the reason is said. The share
     itself: a sine above half the Nyquist frequency is all above it, one below none of it."""
-    from adcpdyn.estimators.attitude_fit import sampled_attitude, share_above_half_nyquist
+    from adcpdyn.estimators.attitude_fit import sampled_attitude
+    from adcpdyn.models.motion import share_above_half_nyquist
     from adcpdyn.models.motion import SampledAttitude, evaluate_attitude
 
     t = np.arange(0.0, 300.0, 1.0)  # Nyquist pi rad/s
@@ -216,6 +217,15 @@ def test_samples_too_sparse_for_the_motion_are_joined_linearly_not_smoothed_away
     truth = sparse.ypr()[2:-2]
     spline = SampledAttitude(sparse.time_s, sparse.ypr(), band_rad_s=chosen.band_rad_s)
     assert np.allclose(at(chosen), truth, atol=1e-12)  # the samples, where the beams ping
+    from adcpdyn.cases.summary import summarise  # `adcpdyn info` says which, before any calibration
+
+    from adcpdyn.models.motion import fast_axes
+
+    told = ", ".join(f"{n} {100 * v:.0f} %" for n, v in fast_axes(sparse.time_s, sparse.ypr()).items())
+    said = lambda c: " ".join(summarise(c).split())  # its lines wrapped at 100 characters, joined back
+    assert "roll" in told and f"joined linearly where the beams take the samples: {told}" in \
+        said(dataclasses.replace(case, attitude=sparse))
+    assert "joined by a smoothing spline within the motion band" in said(case)
     assert np.sqrt(np.mean((at(spline)[:, 2] - truth[:, 2]) ** 2)) > 0.02 * np.std(truth[:, 2])  # cut into the motion
 
 
