@@ -174,7 +174,7 @@ def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
 
     base = SimpleNamespace(runs=[SimpleNamespace(case=SimpleNamespace(name="a"), navigation="random_walk")])
     score = SimpleNamespace(effect="compass_offset", significant=True, params={"compass_offset.A_rad": np.radians(-5.78)},
-                            params_se={"compass_offset.A_rad": np.radians(1.05)})
+                            params_se={"compass_offset.A_rad": np.radians(1.05)}, round=1)
     note = calibration_base_note(record("knots"), base, ["compass_offset"], [score])
     assert "calibrated on knots navigation while this base takes random_walk" in note
     assert "compass_offset.A -5.78 +- 1.1 deg" in note and "+- 2.9 deg" in note and "--navigation random_walk" in note
@@ -185,6 +185,11 @@ def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
     assert calibration_base_note(None, base, ["compass_offset"], [score]) == ""
     other = SimpleNamespace(runs=[SimpleNamespace(case=SimpleNamespace(name="b"), navigation="random_walk")])
     assert calibration_base_note(record("knots"), other, ["compass_offset"], [score]) == ""
+    # chosen in round 2 after a bed: its round-2 score is quoted, not the round-1 one it also had
+    later = SimpleNamespace(**{**vars(score), "params": {"compass_offset.A_rad": np.radians(-3.0)}, "round": 2})
+    bed = SimpleNamespace(effect="moving_bed", significant=True, params={}, params_se={}, round=1)
+    note = calibration_base_note(record("knots"), base, ["moving_bed", "compass_offset"], [bed, score, later])
+    assert "compass_offset.A -3 +- 1.1 deg" in note and "-5.78" not in note
 
 
 @pytest.mark.slow  # 90 s: `make test-slow` (two calibrations, each diagnosing its run on top of itself)
@@ -883,3 +888,20 @@ def test_an_injected_errors_estimate_is_checked_against_what_was_written_in():
             {"error": "moving_bed_m_s", "hit": True, "estimate_z": 3.0}, {"error": "sound_speed_relative", "hit": False,
                                                                           "estimate_z": 9.0}]
     assert coverage(rows) == {"named_with_se": 2, "within": 1, "max_z": 3.0}
+
+
+@pytest.mark.slow  # 10 s: `make test-slow`
+@pytest.mark.skipif(not (REAL / "winriver01.PD0").is_file(), reason="real file absent")
+def test_the_steps_of_a_verdict_chain_to_its_gap_after():
+    """winriver01 names three effects in turn, its bed significant from the first round but chosen in
+    the second: each step's held-out gap is quoted from the model after it (the round that chose it),
+    so the steps chain from the gap before to the gap after (they had quoted the bed's round-1 score:
+    1.113 -> 0.019 -> 0.649 -> 1.004 on the way to -0.230)."""
+    from adcpdyn.cases.importers import import_file
+
+    r = diagnose(import_file(REAL / "winriver01.PD0")[0], DiagnosisConfig(navigation="random_walk"))
+    assert len(r.selected) >= 2
+    steps = [(float(a), float(b)) for a, b in re.findall(r"\w+: (-?\d+\.\d+) -> (-?\d+\.\d+), delta BIC", r.statement)]
+    assert len(steps) == len(r.selected)
+    assert steps[0][0] == pytest.approx(r.gap_before, abs=6e-4) and steps[-1][1] == pytest.approx(r.gap_after, abs=6e-4)
+    assert all(b == a for (_, b), (a, _) in zip(steps, steps[1:]))

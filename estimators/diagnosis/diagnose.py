@@ -207,6 +207,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             # how the given unknowns co-vary (a compass deviation's A, B, C on one course): what a shift of them is judged by
             given_covariance = {"names": list(gm.effect_names), "matrix": cov.tolist()}
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
+    path = []  # the model after each chosen effect, in order
 
     def gain(s: EffectScore) -> float:  # the BIC change that decides: the coloured-residual one
         return s.delta_bic_hac
@@ -284,6 +285,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             selected_terms += effect_terms(base, best.effect)
         current_name = tried[best.effect][0]
         current = fits[current_name]
+        path.append(current_name)
 
     start_model, start_fit = fits[start_name]
     gap_before, z_before = heldout_gap(start_model, cv[start_name], noise)
@@ -293,8 +295,12 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         gap_after, z_after = heldout_gap(current[0], cv[current_name], noise)
         remaining = z_after > config.gap_z and gap_after > config.min_gap
         verdict = "+".join(selected)
-        chosen = [next(s for s in ranking if s.effect == name and s.significant) for name in selected]
-        steps = [gap_before] + [s.gap_after for s in chosen]
+        # each effect's score of the round that chose it (a bed significant in round 1 and chosen in round 2 had
+        # been quoted with its round-1 gap and BIC)
+        chosen = [next(s for s in ranking if s.effect == name and s.significant and s.round == k)
+                  for k, name in enumerate(selected, start=1)]
+        # each step's held-out gap from the model after it, as the gap before and after are measured
+        steps = [gap_before] + [heldout_gap(fits[name][0], cv[name], noise)[0] for name in path]
         statement = (f"{' then '.join(selected)} explain{'s' if len(selected) == 1 else ''} the gap: held-out excess chi2 "
                      f"{gap_before:.3f} -> {gap_after:.3f} ("
                      + "; ".join(f"{s.effect}: {a:.3f} -> {b:.3f}, delta BIC {s.delta_bic:.1f}"

@@ -121,7 +121,7 @@ def calibration_base_note(calibration, base, selected: list, ranking: list) -> s
     calibrated, here = (", ".join(sorted({pair[i] for pair in differs})) for i in (0, 1))
     found = []
     for name in named:
-        score = next(s for s in ranking if s.effect == name and s.significant)
+        score = next(s for s in ranking if s.effect == name and s.significant and s.round == selected.index(name) + 1)
         for key, value in score.params.items():
             se = score.params_se.get(key)
             angle = key.endswith("A_rad")
