@@ -288,7 +288,7 @@ def sampled_attitude(case: Case, fit: AttitudeFit | None = None, interpolation: 
         return SampledAttitude(a.time_s[ok], ypr[ok], interpolation=interpolation, band_rad_s=band,
                                reason=("joined linearly" if interpolation == "linear" else "smoothed within the motion band")
                                + ", as the calibration's runs")
-    fast = undersampled_axes(case)
+    fast = fast_axes(a.time_s[ok], ypr[ok])
     if fast:
         fast = ", ".join(f"{n} {100 * v:.0f} %" for n, v in fast.items())
         return SampledAttitude(a.time_s[ok], ypr[ok], interpolation="linear", band_rad_s=band,

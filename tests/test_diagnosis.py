@@ -175,20 +175,20 @@ def test_a_calibration_on_another_base_is_said_beside_a_recalibrated_effect():
     base = SimpleNamespace(runs=[SimpleNamespace(case=SimpleNamespace(name="a"), navigation="random_walk")])
     score = SimpleNamespace(effect="compass_offset", significant=True, params={"compass_offset.A_rad": np.radians(-5.78)},
                             params_se={"compass_offset.A_rad": np.radians(1.05)}, round=1)
-    note = calibration_base_note(record("knots"), base, ["compass_offset"], [score])
+    note = calibration_base_note(record("knots"), base, [score])
     assert "calibrated on knots navigation while this base takes random_walk" in note
     assert "compass_offset.A -5.78 +- 1.1 deg" in note and "+- 2.9 deg" in note and "--navigation random_walk" in note
     assert note.endswith("what is still named then is in these runs' data, not the bases' difference")
-    assert calibration_base_note(record("random_walk"), base, ["compass_offset"], [score]) == ""
-    assert calibration_base_note(record(None), base, ["compass_offset"], [score]) == ""
-    assert calibration_base_note(record("knots"), base, ["heave"], [score]) == ""
-    assert calibration_base_note(None, base, ["compass_offset"], [score]) == ""
+    assert calibration_base_note(record("random_walk"), base, [score]) == ""
+    assert calibration_base_note(record(None), base, [score]) == ""
+    assert calibration_base_note(record("knots"), base, [SimpleNamespace(**{**vars(score), "effect": "heave"})]) == ""
+    assert calibration_base_note(None, base, [score]) == ""
     other = SimpleNamespace(runs=[SimpleNamespace(case=SimpleNamespace(name="b"), navigation="random_walk")])
-    assert calibration_base_note(record("knots"), other, ["compass_offset"], [score]) == ""
-    # chosen in round 2 after a bed: its round-2 score is quoted, not the round-1 one it also had
+    assert calibration_base_note(record("knots"), other, [score]) == ""
+    # chosen in round 2 after a bed: the score of that round is the one quoted
     later = SimpleNamespace(**{**vars(score), "params": {"compass_offset.A_rad": np.radians(-3.0)}, "round": 2})
     bed = SimpleNamespace(effect="moving_bed", significant=True, params={}, params_se={}, round=1)
-    note = calibration_base_note(record("knots"), base, ["moving_bed", "compass_offset"], [bed, score, later])
+    note = calibration_base_note(record("knots"), base, [bed, later])
     assert "compass_offset.A -3 +- 1.1 deg" in note and "-5.78" not in note
 
 

@@ -165,6 +165,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     noise = dict(sigma_fit)
     n_obs = int((base_model.mask > 0).sum())
     selected_terms, selected, confounded, ranking, alternatives, look_alike = [], [], [], [], [], []
+    chosen = []  # the score of each selected effect in the round that chose it
     current_name, current = "base", (base_model, base_fit)
     walk = base_model.random_walk  # a velocity per ping: long held-out blocks, a smaller shrink share or a paired gain
     block_s = config.block_s(walk)
@@ -207,7 +208,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             # how the given unknowns co-vary (a compass deviation's A, B, C on one course): what a shift of them is judged by
             given_covariance = {"names": list(gm.effect_names), "matrix": cov.tolist()}
     start_name = current_name  # what the chosen effects are judged against: the base, or the base with the given
-    path = []  # the model after each chosen effect, in order
+    path = []  # the model after each selected effect, in order
 
     def gain(s: EffectScore) -> float:  # the BIC change that decides: the coloured-residual one
         return s.delta_bic_hac
@@ -279,6 +280,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         if one_course and not look_alike:  # said once: a later round's pair is the same question
             look_alike.append(one_course)
         selected.append(best.effect)
+        chosen.append(best)
         if best.effect in config.given:  # moved from the runs' own values: free from here on
             base = released(base, best.effect)
         else:
@@ -295,10 +297,6 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         gap_after, z_after = heldout_gap(current[0], cv[current_name], noise)
         remaining = z_after > config.gap_z and gap_after > config.min_gap
         verdict = "+".join(selected)
-        # each effect's score of the round that chose it (a bed significant in round 1 and chosen in round 2 had
-        # been quoted with its round-1 gap and BIC)
-        chosen = [next(s for s in ranking if s.effect == name and s.significant and s.round == k)
-                  for k, name in enumerate(selected, start=1)]
         # each step's held-out gap from the model after it, as the gap before and after are measured
         steps = [gap_before] + [heldout_gap(fits[name][0], cv[name], noise)[0] for name in path]
         statement = (f"{' then '.join(selected)} explain{'s' if len(selected) == 1 else ''} the gap: held-out excess chi2 "
@@ -337,7 +335,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                       f"{a['chosen']} as the likeliest of them, not as proven"
                       + "".join(f" ({x['effect']}: {x['reading']['text']})" for x in a["alternatives"] if "reading" in x))
     statement += "".join("; " + a["statement"] for a in look_alike)
-    for sc in chosen if selected else []:
+    for sc in chosen:
         statement += "".join(f"; {sc.effect}: {r['text']}" for r in reading_of(sc, cases).values())
     if given:
         whose = "what these runs showed when calibrated (held there), " if own else "the run's own "
@@ -348,7 +346,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                                           if r.attitude_source == "samples"))
         statement = ("beams' attitude from the sensor's samples (" + reasons + "): effects on the sensor are undone on "
                      "the samples; " + statement)
-    other_base = calibration_base_note(calibration, base, selected, ranking)
+    other_base = calibration_base_note(calibration, base, chosen)
     if other_base:
         statement += "; " + other_base
     if base.notes:

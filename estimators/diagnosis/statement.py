@@ -103,13 +103,14 @@ RECALIBRATED = ("compass_offset", "compass_deviation", "moving_bed")  # effects 
 OTHER_BASE = "these are the calibration's own runs, calibrated on"  # the note's opening words (calibrate quotes it)
 
 
-def calibration_base_note(calibration, base, selected: list, ranking: list) -> str:
+def calibration_base_note(calibration, base, chosen: list) -> str:
     """What to say when the runs diagnosed are the calibration's own, calibrated on another
     navigation than this base's, and an effect on a quantity the calibration fitted (heading, bed)
     is named: on the same data two bases can read that quantity apart (knots miss a real boat's
     motion between fixes), so the effect may be the bases' difference rather than a change since
-    the calibration. '' otherwise."""
-    named = [e for e in selected if e in RECALIBRATED]
+    the calibration. ``chosen``: the selected effects' scores, each of the round that chose it
+    (a bed significant from round 1 and chosen in round 2 is quoted as round 2 read it). '' otherwise."""
+    named = [s for s in chosen if s.effect in RECALIBRATED]
     if calibration is None or not named:
         return ""
     own = [calibration.run_of(r.case) for r in base.runs]
@@ -120,8 +121,7 @@ def calibration_base_note(calibration, base, selected: list, ranking: list) -> s
         return ""
     calibrated, here = (", ".join(sorted({pair[i] for pair in differs})) for i in (0, 1))
     found = []
-    for name in named:
-        score = next(s for s in ranking if s.effect == name and s.significant and s.round == selected.index(name) + 1)
+    for score in named:
         for key, value in score.params.items():
             se = score.params_se.get(key)
             angle = key.endswith("A_rad")
@@ -129,7 +129,7 @@ def calibration_base_note(calibration, base, selected: list, ranking: list) -> s
                 label, unit, k = (key[:-4], "deg", np.degrees(1.0)) if angle else (key.removesuffix("_m_s"), "m/s", 1.0)
                 found.append(f"{label} {k * value:+.3g}" + (f" +- {k * se:.2g}" if se is not None else "") + f" {unit}")
     extra = ""
-    if calibration.heading_misalignment_se_rad is not None and any(n.startswith("compass") for n in named):
+    if calibration.heading_misalignment_se_rad is not None and any(s.effect.startswith("compass") for s in named):
         extra = f" (the calibration's heading misalignment: +- {np.degrees(calibration.heading_misalignment_se_rad):.2g} deg)"
     return (f"{OTHER_BASE} {calibrated} navigation while this base takes {here}: "
             f"{', '.join(found)}{extra} may be the two bases reading the same data apart rather than a change since the "
