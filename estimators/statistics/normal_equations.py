@@ -259,7 +259,10 @@ def scored_levels(J, raw: np.ndarray, row_group: np.ndarray, used: np.ndarray, k
     a few steps where that iteration crawls because groups trade the same unknowns (the beams', the
     reference's and a walk's levels sharing the velocities: RiverPro's vertical level still 2.5 % a
     round after twelve). Each step is at most ``SCORING_MAX_STEP`` in a log-variance. None above
-    ``SCORING_MAX_UNKNOWNS`` (the caller iterates :func:`group_levels` instead); groups as there."""
+    ``SCORING_MAX_UNKNOWNS`` (the caller iterates :func:`group_levels` instead); groups as there: a
+    group with a redundancy of at most 1 keeps its level (a level heading for zero, as a walk's
+    vertical one does where the beams cannot resolve the boat's heave, would halve at every step
+    and never settle)."""
     J = as_sparse(J)
     if J.shape[1] > SCORING_MAX_UNKNOWNS:
         return None
@@ -270,14 +273,19 @@ def scored_levels(J, raw: np.ndarray, row_group: np.ndarray, used: np.ndarray, k
         M = np.linalg.inv(N)
     except np.linalg.LinAlgError:
         return None
-    groups = [i for i, key in enumerate(keys) if key[1] not in stated and np.sum(g == i) > 3]
-    X, score, size = [], [], []
-    for i in groups:
+    groups, X, score, size = [], [], [], []
+    for i, key in enumerate(keys):
         m = g == i
+        if key[1] in stated or m.sum() <= 3:
+            continue
         Jg = Ju[m]
-        X.append(np.asarray((Jg.T @ Jg) @ M).T)  # M Jg^T Jg (both symmetric), dense
-        r = Jg.shape[0] - np.trace(X[-1])
-        score.append(0.5 * (np.sum(ru[m] ** 2) / levels[keys[i]] ** 2 - r))
+        Xg = np.asarray((Jg.T @ Jg) @ M).T  # M Jg^T Jg (both symmetric), dense
+        r = Jg.shape[0] - np.trace(Xg)
+        if r <= 1.0:  # under a degree of freedom: the level is not estimable (it heads for zero), held as group_levels holds it
+            continue
+        groups.append(i)
+        X.append(Xg)
+        score.append(0.5 * (np.sum(ru[m] ** 2) / levels[key] ** 2 - r))
         size.append(Jg.shape[0])
     info = np.array([[0.5 * ((size[a] - 2 * np.trace(X[a])) * (a == b) + np.sum(X[a] * X[b].T)) for b in range(len(groups))]
                      for a in range(len(groups))])
