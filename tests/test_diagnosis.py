@@ -225,13 +225,14 @@ def test_a_gappy_real_run_calibrated_on_knots_is_told_to_recalibrate():
 @pytest.mark.slow  # 6-8 s: `make test-slow`
 @pytest.mark.skipif(not (REAL / "RiverPro_test01.PD0").is_file(), reason="real file absent")
 def test_a_calibrated_run_under_another_name_keeps_its_calibrated_bed():
-    """RiverPro_test01 calibrated on itself (its bed moving 0.09 m/s) and diagnosed as written under
-    another name (as another tool writes a run with an error injected): the calibration's bed is in
-    the base as for the run itself, so the clean copy names nothing (it had named moving_bed)."""
+    """RiverPro_test01 calibrated on itself with a constant bed (0.09 m/s, kept whatever its direction:
+    ``auto`` drops it as moving against the flow) and diagnosed as written under another name (as
+    another tool writes a run with an error injected): the calibration's bed is in the base as for
+    the run itself, so the clean copy names nothing (it had named moving_bed)."""
     from adcpdyn import api
 
     case = api.import_file(REAL / "RiverPro_test01.PD0").case
-    calibration = as_record(api.calibrate(case, n_starts=4))
+    calibration = as_record(api.calibrate(case, n_starts=4, moving_bed="constant"))
     assert calibration.moving_bed_velocity_m_s is not None
     config = DiagnosisConfig(effects=("moving_bed", "compass_offset", "sound_speed_error"), navigation="random_walk")
     same, renamed = (diagnose(c, config, calibration=calibration) for c in (case, case.replace(name="RiverPro_copy")))
@@ -645,6 +646,33 @@ def test_scoring_reaches_the_redundancies_fixed_point_in_a_few_steps():
     assert max(abs(crawl[k] / scored[k] - 1) for k in keys) > 1e-3  # still on its way after as many rounds
     raw[5] = np.nan  # no step from a non-finite residual: None, so the caller takes the plain one
     assert scored_levels(Jw, raw, group, used, keys, scored) is None
+
+
+def test_a_level_heading_for_zero_is_held_once_it_carries_no_degree_of_freedom():
+    """A walk's vertical level where the boat does not heave: four beams see each ping's vertical
+    velocity at noise 0.5, its prior rows hold it to zero, and the restricted likelihood puts the
+    prior's level at zero (the pings' means spread less than the beams' noise allows). Scoring halved
+    it at every step (its largest) and the levels never settled, as on RiverPro_test01 with a bed
+    written in (20 re-estimations, 'still moved 100 %'); a group whose redundancy has fallen to 1 keeps
+    its level (as the redundancies' step keeps it), and the levels settle, the beams' at their noise."""
+    from adcpdyn.estimators.statistics.normal_equations import VCE_RTOL, largest_move, redundancy, scored_levels
+
+    rng = np.random.default_rng(4)
+    n = 150
+    A = sp.vstack([sp.kron(sp.identity(n), np.ones((4, 1))), sp.identity(n)]).tocsr()
+    y = np.concatenate([rng.normal(0.0, 0.5, 4 * n), np.zeros(n)])  # no heave at all
+    group, used, keys = np.repeat([0, 1], [4 * n, n]), np.ones(5 * n, bool), [(0, "bt"), (0, "vertical")]
+    levels, moves = {k: 1.0 for k in keys}, []
+    for _ in range(30):
+        w = 1.0 / np.array([levels[k] for k in keys])[group]
+        Jw = sp.diags(w) @ A
+        raw = A @ sp.linalg.spsolve((Jw.T @ Jw).tocsc(), Jw.T @ (w * y)) - y
+        new = scored_levels(Jw, raw, group, used, keys, levels)
+        moves.append(largest_move(new, levels))
+        levels = new
+    assert max(moves[-5:]) < VCE_RTOL  # settled, not halving for ever
+    assert 1e-3 < levels[(0, "vertical")] < 0.05 and redundancy(Jw, group, used, 2)[1] <= 1.0  # held near zero
+    assert levels[(0, "bt")] == pytest.approx(0.5, rel=0.05)
 
 
 def test_significance_on_a_random_walk_base_takes_a_paired_held_out_improvement():
