@@ -572,3 +572,75 @@ def test_one_real_run_keeps_what_it_shows_on_top_of_its_calibration(tmp_path):
     assert api.calibrate(halves, n_starts=2).own_effects is None
     with pytest.raises(ValueError, match=r"CalibrationConfig.own_effects: expected one of \['auto', 'on', 'off'\]"):
         CalibrationConfig(own_effects="yes")
+
+
+def test_a_bed_fitted_against_the_flow_is_not_a_moving_bed():
+    """QRev's loop test rejects a closure error that does not point upstream: a bed moves with the
+    near-bed flow. A significant bed more than 45 deg from the flow's direction, beyond twice its
+    direction's standard error, is ``against_flow`` (on one course a heading error of either sign
+    looks like a bed, up- or downstream); along the flow, or too uncertain in direction to say, it moves."""
+    from adcpdyn.estimators.calibration.moving_bed_decision import moving_bed_test
+
+    flow = {"speed_m_s": 1.27, "direction_rad": np.deg2rad(334.0)}
+    towards = lambda deg, speed=0.089: speed * np.array([np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))])
+    se = np.array([0.026, 0.026])
+    upstream = moving_bed_test(towards(160.0), se, False, flow)
+    assert upstream["decision"] == "against_flow"
+    assert upstream["direction_deg"] == pytest.approx(160.0) and upstream["from_flow_deg"] == pytest.approx(-174.0)
+    assert upstream["flow_direction_deg"] == pytest.approx(334.0)
+    # the direction's SE of a bed with equal SEs on both axes is their SE over its speed (radians)
+    assert upstream["direction_se_deg"] == pytest.approx(np.rad2deg(0.026 / 0.089))
+    assert "moves with the near-bed flow" in upstream["reason"]
+    assert moving_bed_test(towards(340.0), se, False, flow)["decision"] == "moving"
+    assert moving_bed_test(towards(20.0), se, False, flow)["decision"] == "moving"  # 46 deg off by less than 2 SE
+    assert moving_bed_test(towards(64.0), se / 10, False, flow)["decision"] == "against_flow"  # 90 deg off, precise
+    assert moving_bed_test(towards(160.0), se, False, None)["decision"] == "moving"  # no water profile: no direction
+    # not significant: fixed whatever its direction; the decision on significance comes first
+    assert moving_bed_test(towards(160.0, 0.01), se, False, flow)["decision"] == "fixed"
+
+
+def test_the_flow_direction_is_the_water_profiles_in_the_true_earth_frame():
+    """mean_flow on deep_ocean (a vessel-frame sensor turned 45 deg on its ship): the direction of the
+    mean water velocity is the simulated current's once the installation yaw turns the beams; a
+    heading correction turns it by as much; no water profile, no flow."""
+    from adcpdyn.estimators.calibration.moving_bed_decision import mean_flow
+
+    case = simulate(get_scenario("deep_ocean"), seed=1)
+    w = case.truth.water_velocity_m_s[..., :2].reshape(-1, 2)
+    truth = np.arctan2(*np.nanmean(w, axis=0)[::-1])
+    flow = mean_flow([case], case.truth.installation_ypr_rad)
+    assert np.angle(np.exp(1j * (flow["direction_rad"] - truth))) == pytest.approx(0.0, abs=np.deg2rad(0.5))
+    assert flow["speed_m_s"] == pytest.approx(float(np.nanmean(np.hypot(w[:, 0], w[:, 1]))), rel=0.02)
+    unturned = mean_flow([case])  # the beams taken as the ship's: off by the installation yaw
+    assert np.angle(np.exp(1j * (flow["direction_rad"] - unturned["direction_rad"]))) == pytest.approx(
+        case.truth.installation_ypr_rad[0], abs=np.deg2rad(0.5))
+    turned = mean_flow([case], case.truth.installation_ypr_rad, heading_correction_rad=0.3)
+    assert turned["direction_rad"] == pytest.approx(flow["direction_rad"] + 0.3)
+    assert mean_flow([case.replace(water=None)]) is None
+
+
+@pytest.mark.slow  # 10 s: `make test-slow`
+def test_a_real_run_whose_bed_would_move_upstream_keeps_its_heading_error_in_the_heading(capsys):
+    """RiverPro_test01 crosses the Tanana almost square to the flow (course ~70 deg, flow ~334 deg):
+    a heading error there turns the bottom track along the flow, and the bed fitted beside the
+    misalignment moves upstream, 0.09 m/s towards ~160 deg (it had been kept as moving, 7 % of the
+    flow). The test now calls it ``against_flow``, solves without it, and carries the bed-free
+    reading of the misalignment with its SE, in the headline too."""
+    from conftest import real
+
+    from adcpdyn import api
+    from adcpdyn.cli.verbs.calibration import _print_calibration
+
+    case = api.import_file(real("RiverPro_test01.PD0")).case
+    r = api.calibrate(case, n_starts=4, own_effects="off")
+    test = r.moving_bed_test
+    assert test["decision"] == "against_flow" and r.moving_bed == "off" and r.moving_bed_velocity_m_s is None
+    assert abs(test["from_flow_deg"]) > 150 and test["speed_m_s"] > 0.05
+    [entry] = [c for c in r.confounded if c["pair"] == ["heading_misalignment", "moving_bed_velocity"]]
+    assert entry["assumed"].startswith("bed fixed (the bed fitted beside it moved against the flow")
+    assert entry["se_if_bed_moves_rad"] > r.heading_misalignment_se_rad
+    # the bed's share of the disagreement went into the heading: the two readings differ by more than an SE
+    assert abs(entry["value_if_bed_moves_rad"] - r.heading_misalignment_rad) > r.heading_misalignment_se_rad
+    _print_calibration(r, "RiverPro_test01")
+    out = " ".join(capsys.readouterr().out.split())
+    assert "with the bed fixed [moving-bed test against_flow; with the bed free" in out

@@ -65,9 +65,10 @@ def _print_calibration(result, title: str) -> None:
         say(f"  r{i + 1}: {cells}")
     if_moves = {c["pair"][0]: c for c in result.confounded if "se_if_bed_moves_rad" in c}
 
-    def bed_fixed(name: str) -> str:  # the moving-bed test could not decide: the pair's other reading, in the headline
+    def bed_fixed(name: str) -> str:  # the bed tested and dropped: the pair's other reading, in the headline
         c = if_moves.get(name)
-        return "" if c is None else (f" with the bed fixed [moving-bed test undetermined; with the bed free "
+        decision = (result.moving_bed_test or {}).get("decision", "undetermined")
+        return "" if c is None else (f" with the bed fixed [moving-bed test {decision}; with the bed free "
                                      f"{deg(c['value_if_bed_moves_rad']):+.4f} +- {deg(c['se_if_bed_moves_rad']):.4f}]")
 
     yaw = bed_fixed("installation_yaw")

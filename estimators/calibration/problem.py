@@ -46,7 +46,7 @@ from ..statistics.normal_equations import (SCORING_MAX_UNKNOWNS, VCE_RTOL, group
                                            scored_levels)
 from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
 from .config import CalibrationConfig
-from .moving_bed_decision import mean_flow_speed, moving_bed_test
+from .moving_bed_decision import mean_flow, moving_bed_test
 from .result import CalibrationResult, RunResult
 
 MIN_PINGS = 3  # a velocity curve and a residual need a few pings
@@ -326,16 +326,18 @@ class CalibrationProblem:
         if not (self.config.moving_bed == "auto" and self.moving_bed == "constant"):
             return result
         confounded = any("moving_bed_velocity" in c.get("pair", []) for c in result.confounded)
-        test = moving_bed_test(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s, confounded,
-                               mean_flow_speed(self.cases))
+        turned = result.heading_misalignment_rad if self.head_yaw else 0.0  # the flow in the bed's (true) Earth frame
+        flow = mean_flow(self.cases, None if self.head_sensor else result.installation_ypr_rad, turned)
+        test = moving_bed_test(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s, confounded, flow)
         if test["decision"] != "moving":  # freed only when the data say it moves (QRev: a test decides)
             free = result
             result = CalibrationProblem(self.cases, dataclasses.replace(self.config, moving_bed="off"), fit=self.fits).solve()
-            if test["decision"] == "undetermined":
-                result.warnings.append(f"moving bed not tested by these runs ({test['reason']}): solved without one; a "
+            if test["decision"] != "fixed":
+                why = "not tested by these runs" if test["decision"] == "undetermined" else "not kept"
+                result.warnings.append(f"moving bed {why} ({test['reason']}): solved without one; a "
                                        "bed that does move is then carried by the heading: run a loop or stationary test, "
                                        "or calibrate transects on several courses together")
-                assumed = assumed_fixed_bed(free)
+                assumed = assumed_fixed_bed(free, test["decision"])
                 result.confounded += assumed
                 result.warnings += [c["statement"] for c in assumed]
         result.moving_bed_test = test
@@ -738,25 +740,34 @@ class CalibrationProblem:
         return out
 
 
-def assumed_fixed_bed(free: CalibrationResult) -> list:
+def assumed_fixed_bed(free: CalibrationResult, decision: str = "undetermined") -> list:
     """The confounding of the solve with the bed free, carried into the result solved with it fixed
-    (the moving-bed test could not decide): the yaw is then known to its reported SE only if the bed
-    is still; each entry adds the yaw's SE with the bed free (``se_if_bed_moves_rad``), so a reader
-    of CALIB.json sees both without parsing a warning."""
+    (the moving-bed test could not decide, or the fitted bed moved against the flow): the yaw is then
+    known to its reported SE only if the bed is still; each entry adds the yaw's SE with the bed free
+    (``se_if_bed_moves_rad``), so a reader of CALIB.json sees both without parsing a warning."""
+    entries = [c for c in free.confounded if "moving_bed_velocity" in c.get("pair", [])]
+    if decision == "against_flow" and not entries:  # the bed's other reading, shared with the yaw or not
+        yaw = "heading_misalignment" if np.isfinite(free.heading_misalignment_se_rad) else "installation_yaw"
+        entries = [{"pair": [yaw, "moving_bed_velocity"], "shared_variance": None, "reason": "the bed against the flow"}]
     out = []
-    for c in free.confounded:
-        if "moving_bed_velocity" not in c.get("pair", []):
-            continue
+    for c in entries:
         heading = c["pair"][0] == "heading_misalignment"
         value = free.heading_misalignment_rad if heading else free.installation_ypr_rad[0]
         se = free.heading_misalignment_se_rad if heading else free.installation_ypr_se_rad[0]
         name = c["pair"][0].replace("_", " ")
-        out.append({**c, "assumed": "bed fixed (the moving-bed test could not decide)", "se_if_bed_moves_rad": float(se),
-                    "value_if_bed_moves_rad": float(value),
-                    "statement": (f"{name} solved with the bed fixed: the moving-bed test could not tell a moving bed from "
-                                  f"a heading error on these courses; if the bed moves, the {name} is known only to +- "
-                                  f"{np.rad2deg(se):.2f} deg (its SE with the bed free, where it is {np.rad2deg(value):+.2f} "
-                                  "deg), not to its reported SE")})
+        if decision == "against_flow":
+            assumed = "bed fixed (the bed fitted beside it moved against the flow)"
+            why = (f"the bed fitted beside it moved against the flow (the {name} {np.rad2deg(value):+.2f} deg there), "
+                   "which no bed does; if a bed does move downstream")
+        else:
+            assumed = "bed fixed (the moving-bed test could not decide)"
+            why = (f"the moving-bed test could not tell a moving bed from a heading error on these courses; if the bed "
+                   f"moves")
+        out.append({**c, "assumed": assumed, "se_if_bed_moves_rad": float(se), "value_if_bed_moves_rad": float(value),
+                    "statement": (f"{name} solved with the bed fixed: {why}, the {name} is known only to +- "
+                                  f"{np.rad2deg(se):.2f} deg (its SE with the bed free"
+                                  + ("" if decision == "against_flow" else f", where it is {np.rad2deg(value):+.2f} deg")
+                                  + "), not to its reported SE")})
     return out
 
 

@@ -41,7 +41,7 @@ from .model import Fit, GapModel, residual_peaks
 from .profiles import REFERENCE_DELAY, delay_profile, fixed_points, marginal_profile
 from .selection import (EffectScore, confounding, needs_ping_evidence, ping_evidence, preference, score_effect,
                         significant)
-from .statement import calibration_base_note, compass_or_bed, confounding_reason, not_the_base, reading_of
+from .statement import base_flow, calibration_base_note, compass_or_bed, confounding_reason, not_the_base, reading_of
 
 MIN_PINGS = 10  # fewer leave the held-out blocks and the periodograms nothing to work on
 PLATFORM = ("installation_", "heading_misalignment", "compass_deviation_", "P_")
@@ -108,6 +108,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     if own:  # what these runs showed when calibrated: held there, the question is what changed since
         config = holding(config, own)
     peaks = residual_peaks(base_model, base_fit)
+    flow = base_flow(cases, base_fit)  # what a named bed's direction is read against
     fits = {"base": (base_model, base_fit)}
     # the given effects held at the runs' own values, each also a candidate: that it moved from there
     own_values = {n: (float(v), np.nan if se is None else float(se)) for n, v, se in config.given_values}
@@ -275,7 +276,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
             alternatives.append({"chosen": best.effect, "round": round_, "shrink": best.shrink_fraction,
                                  "delta_bic": best.delta_bic, "gap_after": best.gap_after,
                                  "alternatives": [{"effect": s.effect, "shrink": s.shrink_fraction, "delta_bic": s.delta_bic,
-                                                   "gap_after": s.gap_after, **reading_of(s, cases)} for s in close]})
+                                                   "gap_after": s.gap_after, **reading_of(s, cases, flow)} for s in close]})
         one_course = compass_or_bed(best.effect, [s.effect for s in scores if s.significant], base)
         if one_course and not look_alike:  # said once: a later round's pair is the same question
             look_alike.append(one_course)
@@ -336,7 +337,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
                       + "".join(f" ({x['effect']}: {x['reading']['text']})" for x in a["alternatives"] if "reading" in x))
     statement += "".join("; " + a["statement"] for a in look_alike)
     for sc in chosen:
-        statement += "".join(f"; {sc.effect}: {r['text']}" for r in reading_of(sc, cases).values())
+        statement += "".join(f"; {sc.effect}: {r['text']}" for r in reading_of(sc, cases, flow).values())
     if given:
         whose = "what these runs showed when calibrated (held there), " if own else "the run's own "
         statement = ("on top of " + whose + ", ".join(f"{n} = {v['value']:.4g} +- {v['se']:.2g}" for n, v in given.items())
@@ -373,7 +374,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
         case=", ".join(c.name for c in cases), verdict=verdict, statement=statement, gap_before=float(gap_before),
         gap_after=float(gap_after), gap_z_before=float(z_before), gap_z_after=float(z_after),
         remaining_gap_significant=bool(remaining), where=where,
-        ranking=[{**r.to_dict(), **reading_of(r, cases)} for r in ranking],
+        ranking=[{**r.to_dict(), **reading_of(r, cases, flow)} for r in ranking],
         noise={_key_name(base_model, k): v for k, v in noise.items()}, base=base_info,
         velocity_error_before_m_s=v_before, velocity_error_after_m_s=v_after, selected=selected, given=given,
         given_covariance=given_covariance,

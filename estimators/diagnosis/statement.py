@@ -12,7 +12,9 @@ import numpy as np
 
 from ..attitude_fit import undersampled_axes
 from .model import DiagnosisBase, GapModel
-from .readings import sound_speed_reading
+from ..calibration.moving_bed_decision import mean_flow
+from ..measurement_model import ANGLE_NAMES
+from .readings import bed_reading, sound_speed_reading
 from .selection import EffectScore
 
 
@@ -72,12 +74,38 @@ def not_the_base(model: GapModel) -> str:
             "set by hand (each channel's is the data's own)")
 
 
-def reading_of(score: EffectScore, cases: list) -> dict:
+BED_KEYS = ("moving_bed.velocity_north_m_s", "moving_bed.velocity_east_m_s")
+
+
+def base_flow(cases: list, base_fit) -> dict | None:
+    """What a named bed is read against, on one run: ``{"flow"}`` the run's flow in the base's
+    true-Earth frame (its heading misalignment or installation angles turning the sensed one,
+    :func:`...calibration.moving_bed_decision.mean_flow`) and ``{"bed"}`` the base's own bed (the
+    calibration's, pinned), or None (several runs, or no water profile)."""
+    if len(cases) != 1:
+        return None
+    values = base_fit.values
+    vessel = cases[0].attitude.frame == "vessel"
+    flow = mean_flow(cases, [values.get(n, 0.0) for n in ANGLE_NAMES] if vessel else None,
+                     values.get("heading_misalignment", 0.0))
+    if flow is None:
+        return None
+    return {"flow": flow, "bed": np.array([values.get("moving_bed_north", 0.0), values.get("moving_bed_east", 0.0)])}
+
+
+def reading_of(score: EffectScore, cases: list, against: dict | None = None) -> dict:
     """``{"reading": {..., "text"}}``: a sound-speed error's estimate in the field's terms
     (:func:`.readings.sound_speed_reading`: the water's sound speed, and the salinity that gives it at
-    the recorded temperature); ``{"aliased": {..., "text"}}``: an attitude latency on samples too
-    sparse for the motion, where delays whole sample intervals apart fit nearly alike (winriver01's
-    injected 0.3 and 1.0 s read -0.98 and -0.27 s, 1.3 s off); empty for other effects."""
+    the recorded temperature); a moving bed's direction against the flow's where ``against``
+    (:func:`base_flow`) gives it (:func:`.readings.bed_reading`); ``{"aliased": {..., "text"}}``: an
+    attitude latency on samples too sparse for the motion, where delays whole sample intervals apart
+    fit nearly alike (winriver01's injected 0.3 and 1.0 s read -0.98 and -0.27 s, 1.3 s off); empty
+    for other effects."""
+    if score.effect == "moving_bed":
+        if against is None or not all(k in score.params for k in BED_KEYS):
+            return {}
+        se = [score.params_se.get(k, np.nan) for k in BED_KEYS]
+        return {"reading": bed_reading([score.params[k] for k in BED_KEYS], se, against["flow"], against["bed"])}
     if score.effect == "attitude_latency":
         fast = [(c, undersampled_axes(c)) for c in cases]
         fast = [(c, f) for c, f in fast if f]
