@@ -711,7 +711,7 @@ def field_selftest(case, calibration=None, *, navigation: str = "auto", effects=
     ----------
     case : path, Case or ImportedCase, or a list of them
         One run, or a survey's runs (one boat, one river: each error written into every run, the
-        bed one velocity across the survey's mean course, and diagnosed jointly).
+        bed one velocity downstream, and diagnosed jointly).
     calibration : path, CalibrationResult, CalibrationRecord or dict, optional
         The file's (survey's) calibration; without one it is calibrated on itself first (8 starts,
         jointly for a survey).

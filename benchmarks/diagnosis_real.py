@@ -60,7 +60,7 @@ SURVEY_WINDOWS_S = ((None, 230.0), (230.0, None))  # the README's survey: the tr
 def bench_diagnosis_survey(quick: bool) -> dict:
     """``adcpdyn bench diagnosis-survey``: a real survey, the README's (winriver02 cut at 230 s into two
     runs), calibrated jointly on itself and put through ``api.field_selftest`` as one survey (each error
-    in both runs, the bed one velocity across the survey's mean course), on the random-walk base. The
+    in both runs, the bed one velocity downstream), on the random-walk base. The
     rows and summary are :func:`bench_diagnosis`'s, so its printer, table and limits paragraph serve."""
     from .. import api
     from ..estimators.diagnosis.field_errors import survey_course

@@ -35,7 +35,8 @@ ERROR_UNKNOWNS = {
     # the low-pass's linearisation at tau = 0 moves the tilts only, while undoing the filter also moves
     # their rates by tau y'' (noisy samples' second derivative): its limit is its forward signature's
     "tilt_lowpass_s": (("tau_s",), (1.0,), False),
-    # the bed is injected across the mean course, in a mix of north and east the course sets
+    # the bed is injected downstream (across the mean course without a water profile), in a mix of north
+    # and east the flow or the course sets
     "moving_bed_m_s": (("velocity_north_m_s", "velocity_east_m_s"), None, True),
     # heave has none: its limit depends on its frequency (:mod:`.signal_limit` gives its signature's)
 }
@@ -58,14 +59,14 @@ def detection_limit(error: str, limits: dict) -> float | None:
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
 
 
-def injected_values(cases, error: str, size: float) -> dict:
+def injected_values(cases, error: str, size: float, calibration=None) -> dict:
     """What an injection of ``size`` puts into its catalog effect's unknowns (their last name ->
     value), to check an estimate and its standard error against: each unknown's change per unit
-    of the error (:data:`ERROR_UNKNOWNS`), the bed across the survey's mean course; empty for an
+    of the error (:data:`ERROR_UNKNOWNS`), the bed where :func:`bed_direction` sends it; empty for an
     error whose effect has no such values (heave: its frequency is the effect's own)."""
     names, per_unit, _ = ERROR_UNKNOWNS.get(error, ((), None, False))
     if error == "moving_bed_m_s":
-        return dict(zip(names, (float(v) for v in size * _across(survey_course(cases)))))
+        return dict(zip(names, (float(v) for v in size * _unit(bed_direction(cases, calibration)))))
     return {} if per_unit is None else {n: float(size * p) for n, p in zip(names, per_unit)}
 
 
@@ -88,10 +89,24 @@ def estimate_z(estimate: dict | None, se: dict | None, injected: dict, own: dict
     return float(max(z)) if z else None
 
 
-def _across(course_rad: float) -> np.ndarray:
-    """The horizontal unit vector (north, east) across ``course_rad`` to its left: where an
-    injected bed moves."""
-    return np.array([np.cos(course_rad - np.pi / 2), np.sin(course_rad - np.pi / 2)])
+def _unit(direction_rad: float) -> np.ndarray:
+    """The horizontal unit vector (north, east) towards ``direction_rad`` (clockwise from north)."""
+    return np.array([np.cos(direction_rad), np.sin(direction_rad)])
+
+
+def bed_direction(cases, calibration=None) -> float:
+    """Where an injected bed moves (rad, clockwise from north): downstream, the direction of the runs'
+    mean water velocity in the true Earth frame (the calibration's heading misalignment, or a vessel
+    sensor's installation angles, turning the sensed one), as a bed moves with the near-bed flow;
+    without a water profile, across the runs' mean course to its left."""
+    from ..calibration.moving_bed_decision import mean_flow
+
+    cases = [cases] if isinstance(cases, Case) else list(cases)
+    turn = getattr(calibration, "heading_misalignment_rad", None)
+    vessel = cases[0].attitude.frame == "vessel"
+    flow = mean_flow(cases, calibration.installation_ypr_rad if calibration is not None and vessel else None,
+                     float(turn) if turn is not None and np.isfinite(turn) else 0.0)
+    return flow["direction_rad"] if flow else survey_course(cases) - np.pi / 2
 
 
 def survey_course(cases) -> float:
@@ -102,24 +117,24 @@ def survey_course(cases) -> float:
     return float(np.arctan2(np.nanmean(v[:, 1]), np.nanmean(v[:, 0])))
 
 
-def inject_survey(cases, error: str, size: float) -> list:
+def inject_survey(cases, error: str, size: float, calibration=None) -> list:
     """Every run of a survey (one boat, one river) with the same field error of ``size``
-    (:func:`inject`): one compass, one clock, one sound speed, one bed, which moves across the
-    survey's mean course in every run."""
+    (:func:`inject`): one compass, one clock, one sound speed, one bed, which moves downstream in
+    every run (:func:`bed_direction`, the calibration's heading turning the flow's)."""
     cases = [cases] if isinstance(cases, Case) else list(cases)
-    course = survey_course(cases) if error == "moving_bed_m_s" else None
-    return [inject(c, error, size, course_rad=course) for c in cases]
+    towards = bed_direction(cases, calibration) if error == "moving_bed_m_s" else None
+    return [inject(c, error, size, bed_rad=towards) for c in cases]
 
 
-def inject(case: Case, error: str, size: float, course_rad: float | None = None) -> Case:
+def inject(case: Case, error: str, size: float, bed_rad: float | None = None) -> Case:
     """``case`` with one field error of ``size`` (units of :data:`FIELD_ERRORS`) written into what
     the instruments recorded.
 
     - compass_offset_deg: every heading sample turned by ``size`` (true = read - size);
     - attitude_latency_s: attitude samples stamped ``size`` late (the sample stamped t holds t - size);
     - reference_latency_s: reference velocities stamped ``size`` late;
-    - moving_bed_m_s: a bed moving at ``size`` across the mean course (to its left; ``course_rad``,
-      default the run's own): the bottom track sees v - u, so the reference, which sees v, gets + u;
+    - moving_bed_m_s: a bed moving at ``size`` towards ``bed_rad`` (default :func:`bed_direction` of
+      the run alone: downstream): the bottom track sees v - u, so the reference, which sees v, gets + u;
     - sound_speed_relative: radials (bottom track and water), slant ranges and cell distances scaled
       by 1 + size (the instrument's sound speed off by that fraction,
       :func:`~adcpdyn.cases.sound_speed.rescale_sound_speed`);
@@ -158,7 +173,7 @@ def inject(case: Case, error: str, size: float, course_rad: float | None = None)
     if error == "reference_latency_s":
         return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
-    u = size * np.append(_across(survey_course(case) if course_rad is None else course_rad), 0.0)
+    u = size * np.append(_unit(bed_direction(case) if bed_rad is None else bed_rad), 0.0)
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
 
 

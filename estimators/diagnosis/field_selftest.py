@@ -49,7 +49,7 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
     held = holding(config, own) if own["effects"] else config
     rows, limits, beyond, reasons = [], {}, {}, {}
     for error, size in trials:
-        run = case if error == "clean" else inject_survey(runs, error, size)
+        run = case if error == "clean" else inject_survey(runs, error, size, calibration)
         if error == "clean" and (recorded or not own["effects"]):  # the first diagnosis is the clean run's, as held
             r, seconds = first, first_s
         else:
@@ -64,7 +64,7 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
                "se": mine["params_se"] if mine else None, "gap": r.gap_before, "gap_z": r.gap_z_before,
                "seconds": seconds, "statement": r.statement}
         if error != "clean":  # the estimate against what was written in (on top of the file's own values)
-            row["injected"] = injected_values(runs, error, size)
+            row["injected"] = injected_values(runs, error, size, calibration)
             row["estimate_z"] = estimate_z(row["estimate"], row["se"], row["injected"],
                                            {n: v.get("value") or 0.0 for n, v in own["unknowns"].items()})
         if error == "clean":

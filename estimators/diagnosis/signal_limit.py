@@ -34,7 +34,7 @@ def signal_statistic(model: GapModel, fit: Fit, case, error: str, size: float, c
     reproduced the error exactly would gain, to first order); the inflation is the HAC variance of
     that model's size over its white one. None when the injected case makes a different model
     (another attitude source, other rows)."""
-    other = GapModel(base_from(inject_survey(case, error, size), config, calibration), solver=config.solver)
+    other = GapModel(base_from(inject_survey(case, error, size, calibration), config, calibration), solver=config.solver)
     if other.names != model.names or other.mask.shape != model.mask.shape:
         return None
     z, w = fit.x / fit.scale, model.weights(fit.sigma)
