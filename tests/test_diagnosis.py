@@ -909,6 +909,24 @@ def test_an_injected_bed_moves_downstream_where_the_run_has_a_water_profile():
     assert bed_direction(still, calibration) == pytest.approx(survey_course(still) - np.pi / 2)
 
 
+def test_a_named_bed_is_read_against_the_flows_direction():
+    """A bed named by the diagnosis, with the base's own bed under it, is read by its direction against
+    the flow's: downstream it moves as a bed does; against the flow (QRev's loop test) a heading error
+    on that course is the likelier cause; off the flow but too uncertain in direction, neither is said."""
+    from adcpdyn.estimators.diagnosis.readings import bed_reading
+
+    flow = {"speed_m_s": 1.2, "direction_rad": np.deg2rad(334.0)}
+    towards = lambda deg, speed: speed * np.array([np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))])
+    down = bed_reading(towards(340.0, 0.2), [0.02, 0.02], flow)
+    assert down["from_flow_deg"] == pytest.approx(6.0) and not down["against_flow"]
+    assert down["text"].endswith("with the flow, as a moving bed goes")
+    up = bed_reading(towards(160.0, 0.2) - towards(340.0, 0.05), [0.02, 0.02], flow, base_bed_m_s=towards(340.0, 0.05))
+    assert up["direction_deg"] == pytest.approx(160.0) and up["against_flow"]  # the total: named plus the base's
+    assert "with the base's own bed under it" in up["text"] and "heading error on this course" in up["text"]
+    vague = bed_reading(towards(64.0, 0.03), [0.02, 0.02], flow)  # 90 deg off, its direction +- 38 deg
+    assert not vague["against_flow"] and "too uncertain in it to rule a bed out" in vague["text"]
+
+
 def test_an_injected_errors_estimate_is_checked_against_what_was_written_in():
     """The field self-test's check of an estimate: each unknown's injected value (a compass offset
     of 2 deg is A = 2 deg in radians, a sound speed +3 % is relative_error -0.03, a bed 0.2 m/s across

@@ -108,7 +108,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     if own:  # what these runs showed when calibrated: held there, the question is what changed since
         config = holding(config, own)
     peaks = residual_peaks(base_model, base_fit)
-    flow = base_flow(cases, base_fit)  # what a named bed's direction is read against
+    flow = base_flow(cases, base_model, base_fit)  # what a named bed's direction is read against
     fits = {"base": (base_model, base_fit)}
     # the given effects held at the runs' own values, each also a candidate: that it moved from there
     own_values = {n: (float(v), np.nan if se is None else float(se)) for n, v, se in config.given_values}

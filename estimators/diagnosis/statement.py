@@ -77,16 +77,18 @@ def not_the_base(model: GapModel) -> str:
 BED_KEYS = ("moving_bed.velocity_north_m_s", "moving_bed.velocity_east_m_s")
 
 
-def base_flow(cases: list, base_fit) -> dict | None:
+def base_flow(cases: list, base_model: GapModel, base_fit) -> dict | None:
     """What a named bed is read against, on one run: ``{"flow"}`` the run's flow in the base's
-    true-Earth frame (its heading misalignment or installation angles turning the sensed one,
-    :func:`...calibration.moving_bed_decision.mean_flow`) and ``{"bed"}`` the base's own bed (the
-    calibration's, pinned), or None (several runs, or no water profile)."""
+    true-Earth frame (its heading misalignment, or its installation angles, estimated, pinned or
+    nominal, turning the sensed one, :func:`...calibration.moving_bed_decision.mean_flow`) and
+    ``{"bed"}`` the base's own bed (the calibration's, pinned), or None (several runs, or no water
+    profile)."""
     if len(cases) != 1:
         return None
     values = base_fit.values
     vessel = cases[0].attitude.frame == "vessel"
-    flow = mean_flow(cases, [values.get(n, 0.0) for n in ANGLE_NAMES] if vessel else None,
+    nominal = base_model.base.spec.nominal_installation_ypr_rad
+    flow = mean_flow(cases, [values.get(n, a) for n, a in zip(ANGLE_NAMES, nominal)] if vessel else None,
                      values.get("heading_misalignment", 0.0))
     if flow is None:
         return None
