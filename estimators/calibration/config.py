@@ -87,9 +87,9 @@ class CalibrationConfig:
         (at least ``MIN_SAMPLES_PER_PERIOD`` per period of the pre-fit's dominant mode).
     moving_bed : str
         The bed moving under the bottom track (bed load; the reference does not see it):
-        ``auto`` (with a moving reference a constant bed, kept only when the data say it moves:
-        :func:`~adcpdyn.estimators.calibration.moving_bed_decision.moving_bed_test`, reported in
-        ``moving_bed_test``; else ``off``), ``off`` (a bed verified
+        ``auto`` (with a moving reference a constant bed, kept only when the data say it moves, and
+        with the flow, not against it: :func:`~adcpdyn.estimators.calibration.moving_bed_decision.moving_bed_test`,
+        reported in ``moving_bed_test``; else ``off``), ``off`` (a bed verified
         fixed, e.g. by a loop or stationary test), ``constant`` (one velocity, north and east,
         shared by the runs) or ``section`` (a piecewise-linear function of the position along
         the section, ``moving_bed_section_knots`` values shared by the runs).
