@@ -625,7 +625,8 @@ def test_a_real_run_whose_bed_would_move_upstream_keeps_its_heading_error_in_the
     a heading error there turns the bottom track along the flow, and the bed fitted beside the
     misalignment moves upstream, 0.09 m/s towards ~160 deg (it had been kept as moving, 7 % of the
     flow). The test now calls it ``against_flow``, solves without it, and carries the bed-free
-    reading of the misalignment with its SE, in the headline too."""
+    reading of the misalignment with its SE, in the headline too; kept as asked (``constant``), the
+    bed comes with a warning that it moves against the flow."""
     from conftest import real
 
     from adcpdyn import api
@@ -644,3 +645,6 @@ def test_a_real_run_whose_bed_would_move_upstream_keeps_its_heading_error_in_the
     _print_calibration(r, "RiverPro_test01")
     out = " ".join(capsys.readouterr().out.split())
     assert "with the bed fixed [moving-bed test against_flow; with the bed free" in out
+    kept = api.calibrate(case, n_starts=4, own_effects="off", moving_bed="constant")  # as asked: kept, and said
+    assert kept.moving_bed == "constant" and kept.moving_bed_test is None
+    assert any(w.startswith("moving bed kept as asked (--moving-bed constant) moves towards") for w in kept.warnings)

@@ -46,7 +46,7 @@ from ..statistics.normal_equations import (SCORING_MAX_UNKNOWNS, VCE_RTOL, group
                                            scored_levels)
 from ..statistics.uncertainty import uncertainty, uncertainty_eliminating
 from .config import CalibrationConfig
-from .moving_bed_decision import mean_flow, moving_bed_test
+from .moving_bed_decision import bed_direction, mean_flow, moving_bed_test
 from .result import CalibrationResult, RunResult
 
 MIN_PINGS = 3  # a velocity curve and a residual need a few pings
@@ -323,11 +323,21 @@ class CalibrationProblem:
         """Solve; with ``moving_bed="auto"`` the fitted bed is tested (:mod:`.moving_bed_decision`) and,
         unless the data say it moves, dropped and the problem solved again without it."""
         result = self._solve()
-        if not (self.config.moving_bed == "auto" and self.moving_bed == "constant"):
+        if self.moving_bed != "constant":
             return result
-        confounded = any("moving_bed_velocity" in c.get("pair", []) for c in result.confounded)
         turned = result.heading_misalignment_rad if self.head_yaw else 0.0  # the flow in the bed's (true) Earth frame
         flow = mean_flow(self.cases, None if self.head_sensor else result.installation_ypr_rad, turned)
+        if self.config.moving_bed != "auto":  # a bed kept as asked: said where it moves against the flow
+            if result.moving_bed_velocity_se_m_s is not None:
+                way = bed_direction(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s, flow)
+                if way["against_flow"]:
+                    result.warnings.append(
+                        f"moving bed kept as asked (--moving-bed constant) moves towards {way['direction_deg']:.0f} +- "
+                        f"{way['direction_se_deg']:.0f} deg, {abs(way['from_flow_deg']):.0f} deg from the flow's "
+                        f"{way['flow_direction_deg']:.0f} deg, which no bed does: on these courses it stands in for a "
+                        "heading error (--moving-bed auto drops it)")
+            return result
+        confounded = any("moving_bed_velocity" in c.get("pair", []) for c in result.confounded)
         test = moving_bed_test(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s, confounded, flow)
         if test["decision"] != "moving":  # freed only when the data say it moves (QRev: a test decides)
             free = result
