@@ -28,7 +28,8 @@ def mean_flow(cases, installation_ypr_rad=None, heading_correction_rad: float = 
     """The runs' flow over their valid cells (static correction, bottom-track referenced), in the
     true Earth frame: ``speed_m_s`` the mean horizontal water speed, ``direction_rad`` the direction
     of the mean water velocity (QRev's flow direction, clockwise from north); None without a water
-    profile. ``installation_ypr_rad`` turns a vessel-frame sensor's beams, ``heading_correction_rad``
+    profile. ``installation_ypr_rad`` turns a vessel-frame sensor's beams (a head sensor's turn with
+    the head: the static correction takes them for a vessel frame only), ``heading_correction_rad``
     (a head sensor's heading misalignment) turns every sensed heading into a true one."""
     from ..asc import asc
 

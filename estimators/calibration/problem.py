@@ -326,7 +326,7 @@ class CalibrationProblem:
         if self.moving_bed != "constant":
             return result
         turned = result.heading_misalignment_rad if self.head_yaw else 0.0  # the flow in the bed's (true) Earth frame
-        flow = mean_flow(self.cases, None if self.head_sensor else result.installation_ypr_rad, turned)
+        flow = mean_flow(self.cases, result.installation_ypr_rad, turned)
         if self.config.moving_bed != "auto":  # a bed kept as asked: said where it moves against the flow
             if result.moving_bed_velocity_se_m_s is not None:
                 way = bed_direction(result.moving_bed_velocity_m_s, result.moving_bed_velocity_se_m_s, flow)

@@ -13,6 +13,7 @@ import numpy as np
 
 from ...cases.case import Case
 from ...cases.sound_speed import rescale_sound_speed
+from ..calibration.moving_bed_decision import mean_flow
 from ..run_setup import has_moving_reference
 
 FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
@@ -99,12 +100,9 @@ def bed_direction(cases, calibration=None) -> float:
     mean water velocity in the true Earth frame (the calibration's heading misalignment, or a vessel
     sensor's installation angles, turning the sensed one), as a bed moves with the near-bed flow;
     without a water profile, across the runs' mean course to its left."""
-    from ..calibration.moving_bed_decision import mean_flow
-
     cases = [cases] if isinstance(cases, Case) else list(cases)
     turn = getattr(calibration, "heading_misalignment_rad", None)
-    vessel = cases[0].attitude.frame == "vessel"
-    flow = mean_flow(cases, calibration.installation_ypr_rad if calibration is not None and vessel else None,
+    flow = mean_flow(cases, getattr(calibration, "installation_ypr_rad", None),
                      float(turn) if turn is not None and np.isfinite(turn) else 0.0)
     return flow["direction_rad"] if flow else survey_course(cases) - np.pi / 2
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...models.sound_speed import salinity_for_sound_speed, salinity_slope, temperature_for_sound_speed
+from ..calibration.moving_bed_decision import bed_direction
 
 
 def sound_speed_reading(c_instrument_m_s: float, relative_error: float, se: float, temperature_c: float | None,
@@ -43,8 +44,6 @@ def bed_reading(velocity_m_s, se_m_s, flow: dict, base_bed_m_s=None) -> dict:
     (:func:`...calibration.moving_bed_decision.bed_direction`); ``text`` says it in one clause. A bed
     moves with the near-bed flow, so one against it is a heading error on that course (QRev's loop
     test rejects a closure error that is not upstream)."""
-    from ..calibration.moving_bed_decision import bed_direction
-
     total = np.asarray(velocity_m_s, dtype=float) + (0.0 if base_bed_m_s is None else np.asarray(base_bed_m_s, dtype=float))
     out = bed_direction(total, se_m_s, flow)
     if out["from_flow_deg"] is None:

@@ -86,10 +86,8 @@ def base_flow(cases: list, base_model: GapModel, base_fit) -> dict | None:
     if len(cases) != 1:
         return None
     values = base_fit.values
-    vessel = cases[0].attitude.frame == "vessel"
     nominal = base_model.base.spec.nominal_installation_ypr_rad
-    flow = mean_flow(cases, [values.get(n, a) for n, a in zip(ANGLE_NAMES, nominal)] if vessel else None,
-                     values.get("heading_misalignment", 0.0))
+    flow = mean_flow(cases, [values.get(n, a) for n, a in zip(ANGLE_NAMES, nominal)], values.get("heading_misalignment", 0.0))
     if flow is None:
         return None
     return {"flow": flow, "bed": np.array([values.get("moving_bed_north", 0.0), values.get("moving_bed_east", 0.0)])}
