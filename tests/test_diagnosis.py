@@ -892,13 +892,13 @@ def test_an_injected_bed_moves_downstream_where_the_run_has_a_water_profile():
     water velocity in the true Earth frame (deep_ocean: a ship's ADCP turned 45 deg on its hull, the
     current towards 333 deg once the calibration's installation yaw turns the beams), so the reference
     gains u along the flow; without a water profile it moves across the course to its left, as before."""
-    from adcpdyn.estimators.diagnosis.field_errors import bed_direction, inject, injected_values, survey_course
+    from adcpdyn.estimators.diagnosis.field_errors import injected_bed_direction, inject, injected_values, survey_course
 
     case = simulate(get_scenario("deep_ocean"), seed=1)
     w = case.truth.water_velocity_m_s[..., :2].reshape(-1, 2)
     current = np.arctan2(*np.nanmean(w, axis=0)[::-1])
     calibration = SimpleNamespace(installation_ypr_rad=case.truth.installation_ypr_rad, heading_misalignment_rad=None)
-    towards = bed_direction(case, calibration)
+    towards = injected_bed_direction(case, calibration)
     assert np.angle(np.exp(1j * (towards - current))) == pytest.approx(0.0, abs=np.deg2rad(0.5))
     bed = inject(case, "moving_bed_m_s", 0.2, bed_rad=towards)
     np.testing.assert_allclose(bed.reference.velocity_m_s - case.reference.velocity_m_s,
@@ -906,7 +906,7 @@ def test_an_injected_bed_moves_downstream_where_the_run_has_a_water_profile():
     u = injected_values(case, "moving_bed_m_s", 0.2, calibration)
     assert [u["velocity_north_m_s"], u["velocity_east_m_s"]] == pytest.approx(0.2 * np.array([np.cos(towards), np.sin(towards)]))
     still = case.replace(water=None)
-    assert bed_direction(still, calibration) == pytest.approx(survey_course(still) - np.pi / 2)
+    assert injected_bed_direction(still, calibration) == pytest.approx(survey_course(still) - np.pi / 2)
 
 
 def test_a_named_bed_is_read_against_the_flows_direction():

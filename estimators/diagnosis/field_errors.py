@@ -63,11 +63,11 @@ NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the 
 def injected_values(cases, error: str, size: float, calibration=None) -> dict:
     """What an injection of ``size`` puts into its catalog effect's unknowns (their last name ->
     value), to check an estimate and its standard error against: each unknown's change per unit
-    of the error (:data:`ERROR_UNKNOWNS`), the bed where :func:`bed_direction` sends it; empty for an
+    of the error (:data:`ERROR_UNKNOWNS`), the bed where :func:`injected_bed_direction` sends it; empty for an
     error whose effect has no such values (heave: its frequency is the effect's own)."""
     names, per_unit, _ = ERROR_UNKNOWNS.get(error, ((), None, False))
     if error == "moving_bed_m_s":
-        return dict(zip(names, (float(v) for v in size * _unit(bed_direction(cases, calibration)))))
+        return dict(zip(names, (float(v) for v in size * _unit(injected_bed_direction(cases, calibration)))))
     return {} if per_unit is None else {n: float(size * p) for n, p in zip(names, per_unit)}
 
 
@@ -95,7 +95,7 @@ def _unit(direction_rad: float) -> np.ndarray:
     return np.array([np.cos(direction_rad), np.sin(direction_rad)])
 
 
-def bed_direction(cases, calibration=None) -> float:
+def injected_bed_direction(cases, calibration=None) -> float:
     """Where an injected bed moves (rad, clockwise from north): downstream, the direction of the runs'
     mean water velocity in the true Earth frame (the calibration's heading misalignment, or a vessel
     sensor's installation angles, turning the sensed one), as a bed moves with the near-bed flow;
@@ -118,9 +118,9 @@ def survey_course(cases) -> float:
 def inject_survey(cases, error: str, size: float, calibration=None) -> list:
     """Every run of a survey (one boat, one river) with the same field error of ``size``
     (:func:`inject`): one compass, one clock, one sound speed, one bed, which moves downstream in
-    every run (:func:`bed_direction`, the calibration's heading turning the flow's)."""
+    every run (:func:`injected_bed_direction`, the calibration's heading turning the flow's)."""
     cases = [cases] if isinstance(cases, Case) else list(cases)
-    towards = bed_direction(cases, calibration) if error == "moving_bed_m_s" else None
+    towards = injected_bed_direction(cases, calibration) if error == "moving_bed_m_s" else None
     return [inject(c, error, size, bed_rad=towards) for c in cases]
 
 
@@ -131,7 +131,7 @@ def inject(case: Case, error: str, size: float, bed_rad: float | None = None) ->
     - compass_offset_deg: every heading sample turned by ``size`` (true = read - size);
     - attitude_latency_s: attitude samples stamped ``size`` late (the sample stamped t holds t - size);
     - reference_latency_s: reference velocities stamped ``size`` late;
-    - moving_bed_m_s: a bed moving at ``size`` towards ``bed_rad`` (default :func:`bed_direction` of
+    - moving_bed_m_s: a bed moving at ``size`` towards ``bed_rad`` (default :func:`injected_bed_direction` of
       the run alone: downstream): the bottom track sees v - u, so the reference, which sees v, gets + u;
     - sound_speed_relative: radials (bottom track and water), slant ranges and cell distances scaled
       by 1 + size (the instrument's sound speed off by that fraction,
@@ -171,7 +171,7 @@ def inject(case: Case, error: str, size: float, bed_rad: float | None = None) ->
     if error == "reference_latency_s":
         return case.replace(reference=ref.shifted(size))
     v = ref.velocity_m_s
-    u = size * np.append(_unit(bed_direction(case) if bed_rad is None else bed_rad), 0.0)
+    u = size * np.append(_unit(injected_bed_direction(case) if bed_rad is None else bed_rad), 0.0)
     return case.replace(reference=dataclasses.replace(ref, velocity_m_s=v + u))
 
 
