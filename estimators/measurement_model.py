@@ -148,10 +148,14 @@ class SurveyModel:
     """
 
     def __init__(self, runs: list[RunSetup], spec: ModelSpec, effects=(), peaks: dict | None = None,
-                 compile_min_pings: int | None = None):
+                 compile_min_pings: int | None = None, data_parameters: bool = False):
         if not runs:
             raise ValueError("runs: expected at least one run")
         self.runs, self.spec = runs, spec
+        # the recorded numbers as parameters of the graph (``data_sym``, ``data_values``), not constants: one
+        # graph, its Jacobian and solver then serve every run of the same shape (:mod:`.diagnosis.model_cache`)
+        self.data_parameters = data_parameters
+        self._data: dict = {}  # name -> (its parameter symbol, its values, column-major)
         # the per-ping models as machine code when the problem's pings (all runs') reach compile_min_pings
         self.compiled = compile_min_pings is not None and sum(r.case.pings.n for r in runs) >= compile_min_pings
         first = runs[0].case
@@ -254,6 +258,35 @@ class SurveyModel:
         self.attitude_true = [self._true_attitude_function(k) for k in range(len(runs))]  # the beams'
         self._build_residuals()
 
+    # ------------------------------------------------------------------ recorded numbers
+    def _datum(self, name: str, values) -> ca.DM | ca.MX:
+        """Recorded numbers in the graph (a vector is a column): a constant, or with ``data_parameters``
+        a parameter of their shape, the values kept by name; a model at another reference shift gives
+        its own values to the same parameter (:meth:`at_reference_shift`)."""
+        v = np.asarray(values, dtype=float)
+        v = v.reshape(-1, 1) if v.ndim == 1 else v
+        if not self.data_parameters:
+            return ca.DM(v)
+        old = self._data.get(name)
+        sym = old[0] if old is not None and old[0].numel() == v.size else ca.MX.sym(name, v.size)
+        self._data[name] = (sym, v.ravel(order="F"))
+        return ca.reshape(sym, *v.shape)
+
+    @property
+    def data_sym(self) -> ca.MX:
+        """The recorded numbers' parameters, stacked (empty unless ``data_parameters``)."""
+        return ca.vertcat(*[sym for sym, _ in self._data.values()]) if self._data else ca.MX(0, 1)
+
+    @property
+    def data_values(self) -> np.ndarray:
+        """The recorded numbers as :attr:`data_sym` stacks them."""
+        return np.concatenate([v for _, v in self._data.values()]) if self._data else np.zeros(0)
+
+    @property
+    def data_layout(self) -> tuple:
+        """(name, size) of each recorded parameter, in order: part of what makes two graphs alike."""
+        return tuple((name, int(sym.numel())) for name, (sym, _) in self._data.items())
+
     # ------------------------------------------------------------------ residuals
     def terms_of(self, k: int) -> list:
         """(effect, its unknowns) of the effects acting on run k."""
@@ -302,8 +335,9 @@ class SurveyModel:
         extra = ([self.heading] if self.heading is not None else []) + [th for _, th in self._sample_terms(k)]
         if run.attitude_source == "samples":
             # the segment about t + shift (its own clock: a latency th then evaluates it at t + th)
-            p = ca.MX(ca.DM(run.samples.params_at(np.asarray(times) + run.sample_shift_s, run.sample_tilt_lead_s))
-                      if segments is None else segments)
+            p = (self._datum(f"run{k}/segments", run.samples.params_at(np.asarray(times) + run.sample_shift_s,
+                                                                        run.sample_tilt_lead_s))
+                 if segments is None else segments)
             return ca.vertcat(p, *[ca.repmat(x, 1, p.shape[1]) for x in extra]) if extra else p
         return ca.vertcat(self.attitude_params[k], *extra)
 
@@ -348,7 +382,10 @@ class SurveyModel:
         time each sample holds (a reference latency's current estimate)."""
         run, ctx, V = self.runs[k], self.contexts[k], self.knot_syms[k]
         L, v_meas = run.reference_time_s.size, run.reference_velocity_m_s
-        data = as_constants(reference_numbers(run, self._shifts_reference(k)))
+        numbers = reference_numbers(run, self._shifts_reference(k))
+        recorded = [key for key in numbers if key in ("t", "a", "b", "t-", "t+") or key.startswith("segment ")]
+        data = {**as_constants({key: v for key, v in numbers.items() if key not in recorded}),
+                **{key: self._datum(f"run{k}/reference {key}", numbers[key]) for key in recorded}}
         p_ref = ca.DM(self.reference_point_sensor(run.case))
         v_model = ca.mtimes(data["basis"], V)  # the navigation there (its mean over each window)
         if run.reference_window_s is None:  # instantaneous samples
@@ -366,7 +403,8 @@ class SurveyModel:
         for e, th in self.terms_of(k):
             v_model, p_ref = e.reference_velocity(v_model, ctx, th), e.reference_point(p_ref, th)
         v_ref = self._fast(REFERENCE_VELOCITY).map(L)(v_model.T, dLam, ca.repmat(p_ref, 1, L))
-        return [ca.transpose(v_ref[j, :]) - np.nan_to_num(v_meas[:, j]) for j in range(3)]
+        return [ca.transpose(v_ref[j, :]) - self._datum(f"run{k}/reference_{NED[j]}", np.nan_to_num(v_meas[:, j]))
+                for j in range(3)]
 
     def at_reference_shift(self, runs: list[RunSetup]) -> "SurveyModel":
         """This model with ``runs`` (these runs at other reference shifts): the reference rows rebuilt,
@@ -375,6 +413,7 @@ class SurveyModel:
         other.runs = list(runs)
         other.contexts = [copy.copy(c) for c in self.contexts]
         other.raw_parts = list(self.raw_parts)
+        other._data = dict(self._data)  # the same parameters; the shifted rows give their own values
         for k, run in enumerate(other.runs):
             other.contexts[k].reference_shift_s = run.reference_shift_s
             if run.moving_reference:
@@ -411,9 +450,10 @@ class SurveyModel:
                 for e, th in terms:
                     psi = e.heading_reading(psi, th)
                 ypr_meas = a.ypr()
-                dpsi = np.nan_to_num(ypr_meas[:, 0]) - psi
-                models += [ca.atan2(ca.sin(dpsi), ca.cos(dpsi)), ca.transpose(tilt_model[1, :]) - np.nan_to_num(ypr_meas[:, 1]),
-                           ca.transpose(tilt_model[2, :]) - np.nan_to_num(ypr_meas[:, 2])]
+                meas = [self._datum(f"run{k}/{n}", np.nan_to_num(ypr_meas[:, j])) for j, n in enumerate(("heading", "pitch", "roll"))]
+                dpsi = meas[0] - psi
+                models += [ca.atan2(ca.sin(dpsi), ca.cos(dpsi)), ca.transpose(tilt_model[1, :]) - meas[1],
+                           ca.transpose(tilt_model[2, :]) - meas[2]]
                 channels += [Channel(k, n, a.time_s, np.isfinite(ypr_meas[:, j]).astype(float))
                              for j, n in enumerate(("heading", "pitch", "roll"))]
                 n_nodes += att.n_instructions() * M
@@ -426,7 +466,7 @@ class SurveyModel:
             V = self.knot_syms[k]
             v_ping = ca.mtimes(hat_basis_dm(pings.time_s, run.knots), V) if V is not None else ca.MX(ca.DM.zeros(N, 3))
             g_rows, beams, ypr_beams = ca.repmat(g_depth, 1, N), ca.DM(self.beam_dirs_t), self.ypr_beams
-            g_level, depth_rows = g_rows, ca.DM(depth).T
+            g_level, depth_rows = g_rows, self._datum(f"run{k}/depth", np.asarray(depth, dtype=float)[None, :])
             radial_scale = range_scale = 1.0
             for e, th in terms:
                 v_ping, g_rows = e.vessel_velocity(v_ping, ctx, th), e.g_depth(g_rows, ctx, th)
@@ -450,11 +490,12 @@ class SurveyModel:
             bt = pings.bt_radial_m_s
             covered = run.covered(pings.time_s)
             for i in range(4):
-                models.append(ca.transpose(radial[i, :]) - np.nan_to_num(bt[:, i]))
+                models.append(ca.transpose(radial[i, :]) - self._datum(f"run{k}/bt_beam{i + 1}", np.nan_to_num(bt[:, i])))
                 channels.append(Channel(k, f"bt_beam{i + 1}", pings.time_s, (np.isfinite(bt[:, i]) & covered).astype(float)))
             if run.use_ranges:
                 for i in range(4):
-                    models.append(ca.transpose(rng[i, :]) - np.nan_to_num(pings.bt_range_m[:, i]))
+                    models.append(ca.transpose(rng[i, :]) - self._datum(f"run{k}/range_beam{i + 1}",
+                                                                        np.nan_to_num(pings.bt_range_m[:, i])))
                     channels.append(Channel(k, f"range_beam{i + 1}", pings.time_s,
                                             (np.isfinite(pings.bt_range_m[:, i]) & covered).astype(float)))
             if run.moving_reference:

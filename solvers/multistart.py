@@ -166,11 +166,13 @@ def build_solver(nlp: dict, options: SolverOptions, name: str = "nlp", residuals
         opts["grad_f"] = gradient
         opts["calc_lam_p"] = False  # d(Lagrangian)/dp would differentiate the residual graph after all
         like = None  # nothing of another solver's derivatives is needed
-    if hessian == "gauss-newton":
-        opts["hess_lag"] = _gauss_newton_hessian(nlp, residuals, upper=options.method == "ipopt", oracle=oracle)
+    # a Gauss-Newton Hessian that is a CasADi graph (not the assembled callback) is shared like the exact one
+    share_hessian = hessian == "exact" or (hessian == "gauss-newton" and not _assembled(residuals))
+    shared = [("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g")] + ([("hess_lag", "nlp_hess_l")] if share_hessian else [])
     if like is not None and options.method == "ipopt":
-        shared = [("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g")] + ([("hess_lag", "nlp_hess_l")] if hessian == "exact" else [])
         opts.update({opt: like.get_function(fn) for opt, fn in shared if like.has_function(fn)})
+    if hessian == "gauss-newton" and "hess_lag" not in opts:
+        opts["hess_lag"] = _gauss_newton_hessian(nlp, residuals, upper=options.method == "ipopt", oracle=oracle)
     quiet = options.print_level == 0 and options.method != "ipopt"
     with silenced(quiet):
         solver = ca.nlpsol(name, options.method, nlp, opts)

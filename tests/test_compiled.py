@@ -154,7 +154,7 @@ def test_compiled_diagnosis_model_equals_the_interpreted_one(cache, monkeypatch)
         m = gap.GapModel(base, [get_effect("moving_bed")], solver=config.solver)
         assert m.model.compiled == (threshold is not None)
         z = m.start({}) / m.scale + 0.01
-        e, _, J = m.residual_fun(z, m.weights(base.sigma0))
+        e, _, J = m.residuals_at(z, m.weights(base.sigma0))
         out[threshold] = (np.asarray(e).ravel(), np.asarray(ca.densify(J)))
     assert compiled.entries(), "the compiled gap model built no library"
     for a, b in zip(out[0], out[None]):

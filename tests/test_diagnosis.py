@@ -738,7 +738,7 @@ def test_a_model_at_another_reference_shift_is_the_model_built_there(reference_f
     x = model.start({n: 0.1 * rng.normal() for n in model.names}, {"reference_latency.delay_s": 0.9})
     sigma = {k: 0.05 for k in model.sigma_keys}
     w = model.weights(sigma)
-    got, want, before = (m.residual_fun(x / m.scale, w) for m in (moved, built, model))
+    got, want, before = (m.residuals_at(x / m.scale, w) for m in (moved, built, model))
     for a, b in zip(got[:2], want[:2]):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(np.asarray(ca.densify(got[2])), np.asarray(ca.densify(want[2])), rtol=1e-10, atol=1e-10)
@@ -816,7 +816,7 @@ def test_pinned_quantities_are_constants_of_the_models_graph():
     rng = np.random.default_rng(2)
     x = free.start({n: 0.05 * rng.normal() for n in free.names}, {name: 0.3})
     w = free.weights({k: 0.05 for k in free.sigma_keys})
-    a, b = (m.residual_fun(x / m.scale, w) for m in (free, pinned))
+    a, b = (m.residuals_at(x / m.scale, w) for m in (free, pinned))
     np.testing.assert_allclose(np.asarray(a[1]), np.asarray(b[1]), rtol=1e-12, atol=1e-12)
     j = free.names.index(name)
     assert ca.DM(b[2])[:, j].nnz() == 0 and ca.DM(a[2])[:, j].nnz() > 0

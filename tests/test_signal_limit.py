@@ -36,8 +36,8 @@ def test_noncentrality_is_the_refits_objective_change(fitted):
     lam, inflation = signal_statistic(model, fit, case, "sound_speed_relative", size, config)
     other = GapModel(base_from([inject(case, "sound_speed_relative", size)], config), solver=config.solver)
     z, w = fit.x / fit.scale, model.weights(fit.sigma)
-    e0 = np.asarray(model.residual_fun(z, w)[0]).ravel()
-    d = np.asarray(other.residual_fun(z, w)[0]).ravel() - e0
+    e0 = np.asarray(model.residuals_at(z, w)[0]).ravel()
+    d = np.asarray(other.residuals_at(z, w)[0]).ravel() - e0
     refit = other.solve(fit.x, fit.sigma, fixed={n: fit.x[i] for i, n in enumerate(model.names) if fit.free is not None
                                                  and not fit.free[i]})
     by_nlp = 2 * refit.objective - 2 * fit.objective

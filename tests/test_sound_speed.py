@@ -93,7 +93,7 @@ def test_ranges_carry_no_common_mode_where_the_depth_is_theirs(boat, effect, val
             x1[i] = value if value is not None else (x0[i] if "omega" in n else 0.05)
         w = model.weights(base.sigma0)
         rows = np.concatenate([np.arange(s.start, s.stop) for c, s in model.channel_slices().items() if "range" in str(c)])
-        e0, e1 = (np.asarray(model.residual_fun(x / model.scale, w)[1]).ravel()[rows] for x in (x0, x1))
+        e0, e1 = (np.asarray(model.residuals_at(x / model.scale, w)[1]).ravel()[rows] for x in (x0, x1))
         moved[label] = np.max(np.abs(e1 - e0))
     assert moved["derived"] < left_m and moved["own"] > 1e-2
 

@@ -18,6 +18,7 @@ from .config import DiagnosisConfig, holding
 from .diagnose import calibration_own_effects, diagnose
 from ..run_setup import has_moving_reference
 from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, estimate_z, inject_survey, injected_values
+from . import model_cache
 from .own_effects import find_own_effects
 from .signal_limit import own_delay_profile, signal_limit
 
@@ -41,6 +42,7 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
     moving = all(has_moving_reference(c) for c in runs)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
                                  if moving or e not in NEEDS_REFERENCE]
+    graphs = model_cache.stats()
     tic = time.perf_counter()
     first = diagnose(case, config, calibration=calibration)  # the calibration's own effects held, where they apply
     first_s = time.perf_counter() - tic
@@ -105,6 +107,7 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
     return {"case": "+".join(c.name for c in runs), "rows": rows, "summary": summarise(rows),
             "navigation": first.base["navigation"], "own_effects": list(own["effects"]),
             "own_effects_from": "calibration" if own is recorded else "found here",
+            "model_graphs": {k: v - graphs[k] for k, v in model_cache.stats().items() if k in ("hits", "misses")},
             "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
 
 
@@ -219,6 +222,10 @@ def _summary_lines(res: dict) -> list:
         lines.append(f"- {e}: top-1 {100 * v['top1']:.0f} %, smallest detected {smallest}, detection limit {limit}")
     for e in res.get("skipped", []):
         lines.append(f"- {e}: not tried (needs a moving reference velocity)")
+    g = res.get("model_graphs")
+    if g:
+        lines.append(f"model graphs: {g['misses']} built, {g['hits']} taken from a run of the same shape (the recorded "
+                     f"numbers are the NLP's parameters; ${model_cache.CACHE_ENV} keeps {model_cache.capacity()})")
     return lines
 
 

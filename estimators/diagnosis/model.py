@@ -32,6 +32,7 @@ from ..attitude_fit import periodogram_peak
 from ..knots import hat_basis
 from ..measurement_model import VELOCITY_NAME, EffectTerm, ModelSpec, SurveyModel, channel_slices
 from ..statistics.normal_equations import as_sparse, log_det_normal
+from . import model_cache
 
 # The per-ping models as machine code from the per-machine cache (:mod:`...solvers.compiled`) at any
 # size: a diagnosis refits tens of NLPs, so even a 261-ping file gains (winriver01, random-walk base:
@@ -169,18 +170,19 @@ class GapModel:
     def _build(self, base: DiagnosisBase, effects, peaks, solver):
         self.base = base
         self.effects = [t if isinstance(t, EffectTerm) else EffectTerm(t) for t in effects]
-        self.model = model = SurveyModel(base.runs, base.spec, self.effects, peaks, compile_min_pings=GAP_COMPILE_MIN_PINGS)
+        self.model = model = SurveyModel(base.runs, base.spec, self.effects, peaks, compile_min_pings=GAP_COMPILE_MIN_PINGS,
+                                         data_parameters=True)
         u = model.unknowns
         self.names, self.scale = list(u.names), u.scale
         self.lbx, self.ubx = u.lower, u.upper
         # calibrated quantities where the calibration put them, the runs' own effects where this model carries them:
         # held, constants of the graph (:meth:`_calibrated_constants`)
         held = {**base.pins.values, **{n: v for n, v in base.held.items() if n in self.names}}
-        self._constant = np.zeros(len(self.names), dtype=bool)
+        self.constant = np.zeros(len(self.names), dtype=bool)
         for name, value in held.items():
             i = self.names.index(name)
             self.lbx[i] = self.ubx[i] = value
-            self._constant[i] = True
+            self.constant[i] = True
         self.effect_index = np.concatenate([u.index(f"effect{i}") for i in range(len(self.effects))] or [np.zeros(0, int)])
         self.effect_index = [int(i) for i in self.effect_index]
         self.effect_names = [self.names[i] for i in self.effect_index]
@@ -195,26 +197,44 @@ class GapModel:
             raise ValueError("diagnosis: the base carries no prior (its heading deviation is pinned or absent)")
 
         x = model.x
-        self._z = z = ca.MX.sym("z", x.shape[0])
-        self._x_of_z = self._calibrated_constants(z)
-        self._w = ca.MX.sym("w", model.raw.shape[0])
-        self._groups = {}  # (first, end) part -> residuals and Jacobian of parts a model at another reference shift shares
+        self.data = model.data_values  # the recorded numbers, the NLP's parameters after the weights
         self.solver_options = solver or SolverOptions(tol=1e-8, max_iter=300, hessian="gauss-newton", expand=False)
         self.lbg, self.ubg = model.lbg, model.ubg
-        self._assemble()
+        self.shape_key = (tuple(self.names), tuple(self.channels), model.data_layout, repr(self.solver_options),
+                          tuple((t.effect.name, t.run) for t in self.effects))
+        kept = model_cache.find(self.shape_key, self)
+        if kept is not None:  # the same graph built before on another run of this shape: its Jacobian and solver
+            self._take_built(kept)
+        else:
+            self._z = z = ca.MX.sym("z", x.shape[0])
+            n_rows, n_data = model.raw.shape[0], self.data.size
+            self._p = ca.MX.sym("p", n_rows + n_data + z.shape[0])  # the weights, the recorded numbers, the scales
+            self._w, self._d = self._p[:n_rows], self._p[n_rows:n_rows + n_data]
+            self._x_of_z = self._calibrated_constants(z, self._p[n_rows + n_data:])
+            self._groups = {}  # (first, end) part -> residuals and Jacobian of parts a model at another reference shift shares
+            self._assemble()
+            model_cache.keep(self.shape_key, self)
         # the fitted navigation per run (corrected velocities, where-regressors)
-        self._nav = [None if V is None else ca.Function("nav", [z], [ca.substitute([V], [x], [self._x_of_z])[0]])
-                     for V in model.knot_syms]
+        self._nav = [None if V is None else ca.Function("nav", [x], [V]) for V in model.knot_syms]
 
-    def _calibrated_constants(self, z: ca.MX) -> ca.MX:
-        """x(z): scale * z, with the calibration's pinned quantities and the held effect unknowns as
-        constants. Their columns of the residual Jacobian are then structurally zero (they are never
+    def _take_built(self, kept: "model_cache.Built") -> None:
+        """The symbols, graph and Jacobian of a model of the same graph (:mod:`.model_cache`), and a solver of
+        its own that shares that model's derivatives (one solver is never called from two threads at once)."""
+        for name, value in kept.parts.items():
+            if name != "solver":
+                setattr(self, name, value)
+        self.solver = build_solver(self.nlp, self.solver_options, "diagnosis", residuals=self.jacobian_fun,
+                                   residual_fun=self.weighted_fun, like=kept.parts["solver"])
+
+    def _calibrated_constants(self, z: ca.MX, scale: ca.MX) -> ca.MX:
+        """x(z): scale * z (the scales a parameter: they follow the run's data, the graph does not), with the
+        calibration's pinned quantities and the held effect unknowns as constants. Their columns of the residual Jacobian are then structurally zero (they are never
         free), so its colouring needs a direction per free shared unknown only: a 2995-ping transect's
         candidate Jacobian took 13 forward directions through the bottom-track rows, 9 of them for pins."""
-        pinned = self._constant
+        pinned = self.constant
         free = np.flatnonzero(~pinned)
-        S = ca.DM(ca.Sparsity.triplet(len(self.names), len(self.names), free.tolist(), free.tolist()), self.scale[free])
-        return ca.mtimes(S, z) + ca.DM(np.where(pinned, self.lbx, 0.0))
+        S = ca.DM(ca.Sparsity.triplet(len(self.names), len(self.names), free.tolist(), free.tolist()), 1.0)
+        return ca.mtimes(S, scale * z) + ca.DM(np.where(pinned, self.lbx, 0.0))
 
     def _assemble(self):
         """The NLP over z, its residual Functions and solver. The residuals are differentiated in groups
@@ -229,7 +249,7 @@ class GapModel:
             group = list(group)  # a run's reference channels, or a stretch between them
             a, b = group[0], group[-1] + 1
             if shifts or (a, b) not in self._groups:
-                parts = ca.substitute(model.raw_parts[a:b], [model.x], [self._x_of_z])
+                parts = ca.substitute(model.raw_parts[a:b], [model.x, model.data_sym], [self._x_of_z, self._d])
                 r = ca.vertcat(*parts)
                 entry = (r, ca.jacobian(w[int(offsets[a]):int(offsets[b])] * r, z))
                 if not shifts:
@@ -239,13 +259,16 @@ class GapModel:
             raw.append(entry[0])
             jac.append(entry[1])
         raw_z, J_z = ca.vertcat(*raw), ca.vertcat(*jac)
-        e_z = w * raw_z
-        self.residual_fun = ca.Function("residuals", [z, w], [e_z, raw_z, J_z])
-        self.jacobian_fun = ca.Function("residual_jacobian", [z, w], [J_z])
+        e_z, p = w * raw_z, self._p
+        self.residual_fun = ca.Function("residuals", [z, p], [e_z, raw_z, J_z])
+        self.jacobian_fun = ca.Function("residual_jacobian", [z, p], [J_z])
+        self.raw_fun = ca.Function("raw_residuals", [z, p], [raw_z])
         g_z = ca.substitute([model.g], [model.x], [self._x_of_z])[0]
-        self.nlp = {"x": z, "p": w, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
+        self.constraint_fun = ca.Function("constraints", [z], [g_z])
+        self.nlp = {"x": z, "p": p, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
+        self.weighted_fun = ca.Function("weighted_residuals", [z, p], [e_z])
         self.solver = build_solver(self.nlp, self.solver_options, "diagnosis", residuals=self.jacobian_fun,
-                                   residual_fun=ca.Function("weighted_residuals", [z, w], [e_z]))
+                                   residual_fun=self.weighted_fun)
 
     def at_reference_shift(self, shift_s: float) -> "GapModel":
         """This model with every run's reference rows taken at t - ``shift_s`` (a reference delay's
@@ -254,7 +277,16 @@ class GapModel:
             other = copy.copy(self)
             other.base = self.base.at_delays(reference_shift_s=shift_s)
             other.model = self.model.at_reference_shift(other.base.runs)
-            other._assemble()
+            other.data = other.model.data_values
+            if other.data.shape != self.data.shape:
+                raise ValueError("at_reference_shift: the shifted reference rows changed the recorded parameters' layout")
+            other.shape_key = self.shape_key + (("reference_shift_s", float(shift_s)),)
+            kept = model_cache.find(other.shape_key, other)
+            if kept is not None:
+                other._take_built(kept)
+            else:
+                other._assemble()
+                model_cache.keep(other.shape_key, other)
         return other
 
     # ------------------------------------------------------------------ names and numbers
@@ -280,6 +312,23 @@ class GapModel:
     def weights(self, sigma: dict) -> np.ndarray:
         return self.mask / np.array([sigma[k] for k in self.sigma_keys])[self.row_sigma]
 
+    def parameters(self, sigma: dict) -> np.ndarray:
+        """The NLP's parameters: the rows' weights at the noise levels ``sigma``, the recorded numbers, the
+        unknowns' scales."""
+        return self.parameters_at(self.weights(sigma))
+
+    def parameters_at(self, weights: np.ndarray) -> np.ndarray:
+        return np.concatenate([weights, self.data, self.scale])
+
+    def residuals_at(self, z, weights: np.ndarray) -> tuple:
+        """(weighted residuals, raw residuals, Jacobian of the weighted ones) at the scaled unknowns ``z``
+        (x / scale) with the rows' ``weights``, as CasADi gives them."""
+        return self.residual_fun(z, self.parameters_at(weights))
+
+    def weighted_residuals(self, z, sigma: dict) -> np.ndarray:
+        """The weighted residuals at the scaled unknowns ``z`` (x / scale), the noise levels ``sigma``."""
+        return np.asarray(self.residual_fun(z, self.parameters(sigma))[0]).ravel()
+
     def start(self, values: dict, overrides: dict | None = None) -> np.ndarray:
         """Unknowns by name from ``values`` (a previous fit's), each effect at its initial values,
         then ``overrides``."""
@@ -298,13 +347,13 @@ class GapModel:
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
         for name, value in (fixed or {}).items():
             i = self.names.index(name)
-            if self._constant[i] and not np.isclose(value, self.lbx[i], rtol=1e-12, atol=1e-12):
+            if self.constant[i] and not np.isclose(value, self.lbx[i], rtol=1e-12, atol=1e-12):
                 raise ValueError(f"fixed: {name} is held at {self.lbx[i]:.6g} in this model's graph, got {value:.6g}")
             lbz[i] = ubz[i] = value / self.scale[i]
             x0s[:, i] = value
-        w = self.weights(sigma)
-        ms = multistart(self.solver, np.clip(x0s / self.scale, lbz, ubz), lbz, ubz, self.lbg, self.ubg, w, progress=False)
-        e, raw, J = self.residual_fun(ms.x, w)
+        p = self.parameters(sigma)
+        ms = multistart(self.solver, np.clip(x0s / self.scale, lbz, ubz), lbz, ubz, self.lbg, self.ubg, p, progress=False)
+        e, raw, J = self.residual_fun(ms.x, p)
         e, raw, J = np.asarray(e), np.asarray(raw), sparse_of(J)
         z = np.asarray(ms.x).ravel()
         tol = BOUND_TOL * np.maximum(np.abs(ubz - lbz), 1.0)
@@ -328,7 +377,7 @@ class GapModel:
         rs = self.base.runs[run]
         if self._nav[run] is None:
             return np.zeros((np.size(times), 3))
-        V = np.asarray(self._nav[run](np.asarray(x) / self.scale))
+        V = np.asarray(self._nav[run](np.asarray(x)))
         return np.column_stack([np.interp(times, rs.knots, V[:, j]) for j in range(3)])
 
     def corrected_velocity(self, fit: Fit, run: int = 0) -> np.ndarray:

@@ -37,9 +37,9 @@ def signal_statistic(model: GapModel, fit: Fit, case, error: str, size: float, c
     other = GapModel(base_from(inject_survey(case, error, size, calibration), config, calibration), solver=config.solver)
     if other.names != model.names or other.mask.shape != model.mask.shape:
         return None
-    z, w = fit.x / fit.scale, model.weights(fit.sigma)
+    z = fit.x / fit.scale
     same = (other.mask > 0) == (model.mask > 0)
-    d = np.asarray(other.residual_fun(z, w)[0]).ravel() - np.asarray(model.residual_fun(z, w)[0]).ravel()
+    d = other.weighted_residuals(z, fit.sigma) - model.weighted_residuals(z, fit.sigma)
     d = np.nan_to_num(np.where(same, d, 0.0))
     if not np.any(d):
         return 0.0, 1.0

@@ -1,0 +1,133 @@
+"""Built diagnosis models kept by shape, so that one graph, its Jacobian and its solver serve every
+run of that shape (issue 25: data as parameters).
+
+A :class:`~.model.GapModel` takes the recorded numbers (radials, ranges, depths, the sensor's
+segments, reference velocities) as NLP parameters, so two models differ in their graph only by
+what is baked into it: the unknowns' scales and pins, the navigation's knots, the reference's
+times and weights, the effects' own constants. A model is taken from here only when its cheap
+symbolic residuals agree with the kept model's at random unknowns on its own data (and the
+constraints too): two graphs that agree at random points are the same function, so its
+Jacobian, colouring and solver are the same. What differs is rebuilt, never guessed.
+
+``ADCPDYN_MODEL_CACHE`` sets how many are kept (0: none); :func:`stats` counts hits and misses.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+CACHE_ENV = "ADCPDYN_MODEL_CACHE"
+DEFAULT_SIZE = 32  # a diagnosis builds about 30 graphs (16 candidates, 14 again at other reference delays); ~22 MB each at 3000 pings
+CHECK_POINTS = 2
+CHECK_RTOL = 1e-9
+
+# what a model built and another of its graph takes (:meth:`.model.GapModel._take_built`): symbols, graph,
+# Functions and the solver whose derivatives a new solver shares; never the runs or their numbers
+PARTS = ("_z", "_x_of_z", "_p", "_w", "_d", "_groups", "residual_fun", "jacobian_fun", "raw_fun", "constraint_fun",
+         "weighted_fun", "nlp", "solver")
+_kept: OrderedDict = OrderedDict()  # shape key -> [Built]
+
+
+@dataclass(frozen=True)
+class Built:
+    """A built model's graph without its runs: :data:`PARTS`, and what :func:`same_graph` compares first."""
+
+    parts: dict
+    n_unknowns: int
+    n_data: int
+    constant: np.ndarray
+
+    @classmethod
+    def of(cls, model) -> "Built":
+        return cls({name: getattr(model, name) for name in PARTS}, model.scale.size, model.data.size,
+                   model.constant.copy())
+_lock = threading.Lock()
+_stats = {"hits": 0, "misses": 0, "rejected": 0}
+
+
+def capacity() -> int:
+    try:
+        return max(0, int(os.environ.get(CACHE_ENV, DEFAULT_SIZE)))
+    except ValueError:
+        raise ValueError(f"${CACHE_ENV}: expected a whole number of models to keep, got "
+                         f"{os.environ[CACHE_ENV]!r}") from None
+
+
+def stats() -> dict:
+    """Hits, misses and rejected candidates (a model of the same shape whose graph differed) so far."""
+    with _lock:
+        return {**_stats, "kept": sum(len(v) for v in _kept.values())}
+
+
+def clear() -> None:
+    with _lock:
+        _kept.clear()
+        for k in _stats:
+            _stats[k] = 0
+
+
+def find(key, model) -> Built | None:
+    """A kept graph of ``key`` that is ``model``'s (:func:`same_graph`), or None."""
+    if capacity() == 0:
+        return None
+    with _lock:
+        candidates = list(_kept.get(key, ()))
+    for other in candidates:
+        if same_graph(model, other):
+            with _lock:
+                _stats["hits"] += 1
+                if key in _kept:
+                    _kept.move_to_end(key)
+            return other
+        with _lock:
+            _stats["rejected"] += 1
+    with _lock:
+        _stats["misses"] += 1
+    return None
+
+
+def keep(key, model) -> None:
+    n = capacity()
+    if n == 0:
+        return
+    with _lock:
+        _kept.setdefault(key, []).append(Built.of(model))
+        _kept.move_to_end(key)
+        while sum(len(v) for v in _kept.values()) > n:
+            oldest = next(iter(_kept))
+            _kept[oldest].pop(0)
+            if not _kept[oldest]:
+                del _kept[oldest]
+
+
+def same_graph(model, built: Built) -> bool:
+    """Whether the ``built`` graph computes ``model``'s residuals and constraints: both evaluated at
+    random unknowns (within the bounds, pins at theirs) on ``model``'s recorded numbers, ``model``'s from
+    its own symbolic residuals (not differentiated: cheap)."""
+    if built.n_unknowns != model.scale.size or built.n_data != model.data.size or \
+            not np.array_equal(built.constant, model.constant):
+        return False
+    sm = model.model
+    fresh = ca.Function("check", [sm.x, sm.data_sym], [sm.raw, sm.g])
+    rng = np.random.default_rng(20261201)
+    lbz, ubz = model.lbx / model.scale, model.ubx / model.scale
+    for _ in range(CHECK_POINTS):
+        z = np.clip(rng.uniform(-1.0, 1.0, model.scale.size), lbz, ubz)
+        x = np.where(model.constant, model.lbx, z * model.scale)
+        raw, g = (np.asarray(v, dtype=float).ravel() for v in fresh(x, model.data))
+        p = model.parameters_at(np.ones(raw.size))
+        raw_o = np.asarray(built.parts["raw_fun"](z, p), dtype=float).ravel()
+        g_o = np.asarray(built.parts["constraint_fun"](z), dtype=float).ravel()
+        if raw_o.shape != raw.shape or g_o.shape != g.shape or np.mean(np.isfinite(raw)) < 0.9:
+            return False
+        for a, b in ((raw, raw_o), (g, g_o)):
+            if not np.allclose(a, b, rtol=CHECK_RTOL, atol=CHECK_RTOL * max(np.nanmax(np.abs(a), initial=0.0), 1e-12),
+                               equal_nan=True):
+                return False
+    return True
