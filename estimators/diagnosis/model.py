@@ -12,7 +12,8 @@ pinned at its value (:class:`Pins`) and its noise levels start the fit. Every ef
 unknowns through the hooks of :class:`adcpdyn.models.effects.base.Effect`, on the motion model
 or on the sensor's samples. Residuals are kept unweighted per channel; the objective weights
 them by noise levels per (run, channel group) passed as parameters, so noise can be
-re-estimated without rebuilding.
+re-estimated without rebuilding; the recorded numbers and the unknowns' scales are parameters too, so
+another run of the same shape takes the graph built before (:mod:`.model_cache`).
 """
 
 from __future__ import annotations
@@ -228,9 +229,10 @@ class GapModel:
 
     def _calibrated_constants(self, z: ca.MX, scale: ca.MX) -> ca.MX:
         """x(z): scale * z (the scales a parameter: they follow the run's data, the graph does not), with the
-        calibration's pinned quantities and the held effect unknowns as constants. Their columns of the residual Jacobian are then structurally zero (they are never
-        free), so its colouring needs a direction per free shared unknown only: a 2995-ping transect's
-        candidate Jacobian took 13 forward directions through the bottom-track rows, 9 of them for pins."""
+        calibration's pinned quantities and the held effect unknowns as constants. Their columns of the
+        residual Jacobian are then structurally zero (they are never free), so its colouring needs a
+        direction per free shared unknown only: a 2995-ping transect's candidate Jacobian took 13 forward
+        directions through the bottom-track rows, 9 of them for pins."""
         pinned = self.constant
         free = np.flatnonzero(~pinned)
         S = ca.DM(ca.Sparsity.triplet(len(self.names), len(self.names), free.tolist(), free.tolist()), 1.0)
