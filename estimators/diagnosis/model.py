@@ -203,20 +203,26 @@ class GapModel:
         self.lbg, self.ubg = model.lbg, model.ubg
         self.shape_key = (tuple(self.names), tuple(self.channels), model.data_layout, repr(self.solver_options),
                           tuple((t.effect.name, t.run) for t in self.effects))
+        self._take_or_assemble(new_symbols=True)
+        # the fitted navigation per run (corrected velocities, where-regressors)
+        self._nav = [None if V is None else ca.Function("nav", [x], [V]) for V in model.knot_syms]
+
+    def _take_or_assemble(self, new_symbols: bool) -> None:
+        """The graph built before on another run of this shape (:mod:`.model_cache`), else built here (over
+        new symbols, or this model's own at another reference shift) and kept."""
         kept = model_cache.find(self.shape_key, self)
-        if kept is not None:  # the same graph built before on another run of this shape: its Jacobian and solver
+        if kept is not None:
             self._take_built(kept)
-        else:
-            self._z = z = ca.MX.sym("z", x.shape[0])
-            n_rows, n_data = model.raw.shape[0], self.data.size
-            self._p = ca.MX.sym("p", n_rows + n_data + z.shape[0])  # the weights, the recorded numbers, the scales
+            return
+        if new_symbols:
+            self._z = z = ca.MX.sym("z", len(self.names))
+            n_rows, n_data = self.model.raw.shape[0], self.data.size
+            self._p = ca.MX.sym("p", n_rows + n_data + len(self.names))  # the weights, the recorded numbers, the scales
             self._w, self._d = self._p[:n_rows], self._p[n_rows:n_rows + n_data]
             self._x_of_z = self._calibrated_constants(z, self._p[n_rows + n_data:])
             self._groups = {}  # (first, end) part -> residuals and Jacobian of parts a model at another reference shift shares
-            self._assemble()
-            model_cache.keep(self.shape_key, self)
-        # the fitted navigation per run (corrected velocities, where-regressors)
-        self._nav = [None if V is None else ca.Function("nav", [x], [V]) for V in model.knot_syms]
+        self._assemble()
+        model_cache.keep(self.shape_key, self)
 
     def _take_built(self, kept: "model_cache.Built") -> None:
         """The symbols, graph and Jacobian of a model of the same graph (:mod:`.model_cache`), and a solver of
@@ -283,12 +289,7 @@ class GapModel:
             if other.data.shape != self.data.shape:
                 raise ValueError("at_reference_shift: the shifted reference rows changed the recorded parameters' layout")
             other.shape_key = self.shape_key + (("reference_shift_s", float(shift_s)),)
-            kept = model_cache.find(other.shape_key, other)
-            if kept is not None:
-                other._take_built(kept)
-            else:
-                other._assemble()
-                model_cache.keep(other.shape_key, other)
+            other._take_or_assemble(new_symbols=False)
         return other
 
     # ------------------------------------------------------------------ names and numbers
