@@ -330,7 +330,7 @@ class GapModel:
 
     def weighted_residuals(self, z, sigma: dict) -> np.ndarray:
         """The weighted residuals at the scaled unknowns ``z`` (x / scale), the noise levels ``sigma``."""
-        return np.asarray(self.residual_fun(z, self.parameters(sigma))[0]).ravel()
+        return np.asarray(self.weighted_fun(z, self.parameters(sigma))).ravel()  # not their Jacobian
 
     def start(self, values: dict, overrides: dict | None = None) -> np.ndarray:
         """Unknowns by name from ``values`` (a previous fit's), each effect at its initial values,

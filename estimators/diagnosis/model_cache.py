@@ -78,8 +78,9 @@ def find(key, model) -> Built | None:
         return None
     with _lock:
         candidates = list(_kept.get(key, ()))
+    points = probe(model) if candidates else []  # the new model's own numbers, once for every candidate
     for other in candidates:
-        if same_graph(model, other):
+        if same_graph(model, other, points):
             with _lock:
                 _stats["hits"] += 1
                 if key in _kept:
@@ -106,22 +107,30 @@ def keep(key, model) -> None:
                 del _kept[oldest]
 
 
-def same_graph(model, built: Built) -> bool:
-    """Whether the ``built`` graph computes ``model``'s residuals and constraints: both evaluated at
-    random unknowns (within the bounds, pins at theirs) on ``model``'s recorded numbers, ``model``'s from
-    its own symbolic residuals (not differentiated: cheap)."""
-    if built.n_unknowns != model.scale.size or built.n_data != model.data.size or \
-            not np.array_equal(built.constant, model.constant):
-        return False
+def probe(model) -> list:
+    """``model``'s residuals and constraints from its own symbolic graph (not differentiated: cheap) at
+    random unknowns (within the bounds, pins at theirs) on its recorded numbers: per point (z, the NLP's
+    parameters with unit weights, residuals, constraints)."""
     sm = model.model
     fresh = ca.Function("check", [sm.x, sm.data_sym], [sm.raw, sm.g])
     rng = np.random.default_rng(20261201)
     lbz, ubz = model.lbx / model.scale, model.ubx / model.scale
+    points = []
     for _ in range(CHECK_POINTS):
         z = np.clip(rng.uniform(-1.0, 1.0, model.scale.size), lbz, ubz)
         x = np.where(model.constant, model.lbx, z * model.scale)
         raw, g = (np.asarray(v, dtype=float).ravel() for v in fresh(x, model.data))
-        p = model.parameters_at(np.ones(raw.size))
+        points.append((z, model.parameters_at(np.ones(raw.size)), raw, g))
+    return points
+
+
+def same_graph(model, built: Built, points: list | None = None) -> bool:
+    """Whether the ``built`` graph computes ``model``'s residuals and constraints at the :func:`probe`
+    ``points`` (made here when not given)."""
+    if built.n_unknowns != model.scale.size or built.n_data != model.data.size or \
+            not np.array_equal(built.constant, model.constant):
+        return False
+    for z, p, raw, g in points if points is not None else probe(model):
         raw_o = np.asarray(built.parts["raw_fun"](z, p), dtype=float).ravel()
         g_o = np.asarray(built.parts["constraint_fun"](z), dtype=float).ravel()
         if raw_o.shape != raw.shape or g_o.shape != g.shape or np.mean(np.isfinite(raw)) < 0.9:
