@@ -125,6 +125,22 @@ def test_a_kept_graph_at_another_reference_shift_is_the_model_built_there(monkey
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-10)
 
 
+def test_a_graph_another_model_took_outlives_graphs_no_model_took(monkeypatch):
+    """Over its capacity the cache drops the least recently used graph no model has taken: the clean run's
+    graph, taken by an injected run, survives a run of other shapes."""
+    model_cache.clear()
+    monkeypatch.setenv(model_cache.CACHE_ENV, "2")
+    clean = _case()
+    GapModel(base_from([clean], CONFIG), solver=CONFIG.solver)
+    GapModel(base_from([inject(clean, "moving_bed_m_s", 0.2)], CONFIG), solver=CONFIG.solver)  # takes it
+    assert model_cache.stats()["hits"] == 1
+    for seconds in (16.0, 18.0):  # other lengths: graphs of other shapes, each kept, never taken
+        GapModel(base_from([_case(seconds)], CONFIG), solver=CONFIG.solver)
+    assert model_cache.stats()["kept"] == 2
+    GapModel(base_from([inject(clean, "compass_offset_deg", 2.0)], CONFIG), solver=CONFIG.solver)
+    assert model_cache.stats()["hits"] == 2
+
+
 def test_the_cache_size_is_read_in_one_line(monkeypatch):
     monkeypatch.setenv(model_cache.CACHE_ENV, "many")
     with pytest.raises(ValueError, match=r"\$ADCPDYN_MODEL_CACHE: expected a whole number of models to keep, got 'many'"):

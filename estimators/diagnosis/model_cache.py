@@ -34,14 +34,16 @@ PARTS = ("_z", "_x_of_z", "_p", "_w", "_d", "_groups", "residual_fun", "jacobian
 _kept: OrderedDict = OrderedDict()  # shape key -> [Built]
 
 
-@dataclass(frozen=True)
+@dataclass(eq=False)
 class Built:
-    """A built model's graph without its runs: :data:`PARTS`, and what :func:`same_graph` compares first."""
+    """A built model's graph without its runs: :data:`PARTS`, what :func:`same_graph` compares first, and
+    how often another model took it (``taken``)."""
 
     parts: dict
     n_unknowns: int
     n_data: int
     constant: np.ndarray
+    taken: int = 0
 
     @classmethod
     def of(cls, model) -> "Built":
@@ -83,6 +85,7 @@ def find(key, model) -> Built | None:
         if same_graph(model, other, points):
             with _lock:
                 _stats["hits"] += 1
+                other.taken += 1
                 if key in _kept:
                     _kept.move_to_end(key)
             return other
@@ -94,17 +97,22 @@ def find(key, model) -> Built | None:
 
 
 def keep(key, model) -> None:
+    """Keep ``model``'s graph; over :func:`capacity`, drop the least recently used graph that no model has
+    taken yet (else the least recently used): a field self-test's clean-run graphs, taken by every injected
+    run, outlive a run whose error makes graphs of other shapes (a motion model's attitude latency)."""
     n = capacity()
     if n == 0:
         return
+    new = Built.of(model)
     with _lock:
-        _kept.setdefault(key, []).append(Built.of(model))
+        _kept.setdefault(key, []).append(new)
         _kept.move_to_end(key)
         while sum(len(v) for v in _kept.values()) > n:
-            oldest = next(iter(_kept))
-            _kept[oldest].pop(0)
-            if not _kept[oldest]:
-                del _kept[oldest]
+            kept = [(k, b) for k, bs in _kept.items() for b in bs if b is not new]
+            k, b = next(((k, b) for k, b in kept if b.taken == 0), kept[0])
+            _kept[k] = [x for x in _kept[k] if x is not b]
+            if not _kept[k]:
+                del _kept[k]
 
 
 def probe(model) -> list:
