@@ -150,8 +150,52 @@ def envelope_parabola(marginal: dict, best: float, step: float) -> tuple:
     return float(curvature), float(slope)
 
 
-PROFILE_REFINEMENTS = 3
+PROFILE_REFINEMENTS = 6
 PROFILE_SE_SHARE = 0.25  # the profile's maximum located to this share of its SE
+PROFILE_WIDTH_SE = 4.0  # by a parabola through points at most this many SEs apart
+
+
+def profile_maximum(log_likelihood, centre: float, half: float, lo: float, hi: float,
+                    refinements: int = PROFILE_REFINEMENTS) -> tuple:
+    """(best point, curvature there, {point: value}) of a one-dimensional profile ``log_likelihood``
+    on [lo, hi]. From ``centre`` and ``centre`` +- ``half``: the vertex of the parabola through the best
+    point and its nearest neighbours on either side (its two nearest where it is outermost), each step
+    at most that parabola's width (up the slope by the width where it does not curve down), until the
+    vertex lies within :data:`PROFILE_SE_SHARE` of the best point's standard error 1/sqrt(-2 curvature)
+    and the three points within :data:`PROFILE_WIDTH_SE` of it (else the points one SE either side),
+    at most ``refinements`` steps. The curvature is >= 0 where the profile does not curve down."""
+    values = {}
+
+    def visit(v: float) -> None:
+        v = float(np.clip(v, lo, hi))
+        if v not in values:
+            values[v] = float(log_likelihood(v))
+
+    def parabola():  # (best, curvature, slope at the best, the three points' width)
+        best = max(values, key=values.__getitem__)
+        below, above = [u for u in values if u < best], [u for u in values if u > best]
+        # the nearest three alone could lie on one side of a bracketed best (winriver01 with a 4 % sound speed
+        # written in: 0, -0.01 and -0.03 nearest -0.03 while -0.06 lay beyond it: its vertex was never visited)
+        three = ([max(below), best, min(above)] if below and above else
+                 sorted(sorted(values, key=lambda u: abs(u - best))[:3]))
+        curvature, slope, _ = np.polyfit(np.array(three) - best, [values[u] for u in three], 2)
+        return best, float(curvature), float(slope), max(three) - min(three)
+
+    for v in (centre, centre - half, centre + half):
+        visit(v)
+    for _ in range(refinements):
+        best, curvature, slope, width = parabola()
+        step = -slope / (2 * curvature) if curvature < 0 else np.sign(slope) * np.inf  # else walk on up the slope
+        se = 1.0 / np.sqrt(-2.0 * curvature) if curvature < 0 else np.inf
+        if abs(step) < PROFILE_SE_SHARE * se:
+            if width <= PROFILE_WIDTH_SE * se:
+                break  # the maximum is located well within its standard error, by points near enough to give it
+            for v in (best - se, best + se):  # a wide parabola's curvature understates a peak's
+                visit(v)
+        else:
+            visit(best + float(np.clip(step, -width, width)))
+    best, curvature, _, _ = parabola()
+    return best, curvature, values
 
 
 def marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pinned: dict, config: DiagnosisConfig,
@@ -160,42 +204,23 @@ def marginal_profile(model: GapModel, name: str, values: dict, sigma: dict, pinn
     unknown ``name``, which scales the velocities the beams see (a sound speed, a beam angle): the
     joint fit the NLP minimises rewards a smaller velocity path, whose walk's rows shrink (winriver01,
     recorded at sea with a salinity setting of 0 ppt: the joint fit puts the sound speed 3.7 % low, the
-    marginal 2.8 % high, the salinity's error). Each point is a fit with the unknown held; parabolas
-    through the three points nearest the best, from 0 and +- the unknown's scale (or ``around``: an
-    earlier profile's maximum and SE, the first points there and +- the SE), then at each vertex
-    until it moves by less than :data:`PROFILE_SE_SHARE` of the SE, give the maximum, and the last
-    one's curvature its standard error (``Fit.profile_se``; NaN where it does not curve down); the
-    model at the maximum is taken to its delays' fixed point (:func:`fixed_points`)."""
+    marginal 2.8 % high, the salinity's error). Each point is a fit with the unknown held, searched by
+    :func:`profile_maximum` from 0 and +- the unknown's scale (or ``around``: an earlier profile's
+    maximum and SE, the first points there and +- the SE); the curvature at the maximum gives its
+    standard error (``Fit.profile_se``; NaN where it does not curve down); the model at the maximum is
+    taken to its delays' fixed point (:func:`fixed_points`)."""
     i = model.names.index(name)
     lo, hi, step = float(model.lbx[i]), float(model.ubx[i]), float(model.scale[i])
     fits = {}
 
-    def visit(v: float) -> None:
-        v = float(np.clip(v, lo, hi))
-        if v not in fits:
-            near = min(fits, key=lambda u: abs(u - v)) if fits else None
-            x = fits[near][0].values if near is not None else values
-            f = model.solve(model.start(x, {name: v}), sigma, fixed={**pinned, name: v})
-            fits[v] = (f, f.log_likelihood(model))
-
-    def parabola():  # through the three points nearest the best: (best, curvature, slope, their width)
-        best = max(fits, key=lambda u: fits[u][1])
-        three = sorted(sorted(fits, key=lambda u: abs(u - best))[:3])
-        curvature, slope, _ = np.polyfit(np.array(three) - best, [fits[u][1] for u in three], 2)
-        return best, curvature, slope, max(three) - min(three)
+    def log_likelihood(v: float) -> float:  # started from the nearest point's fit
+        near = min(fits, key=lambda u: abs(u - v)) if fits else None
+        x = fits[near].values if near is not None else values
+        fits[v] = model.solve(model.start(x, {name: v}), sigma, fixed={**pinned, name: v})
+        return fits[v].log_likelihood(model)
 
     centre, half = around if around is not None else (0.0, step)
-    half = max(half, 0.1 * step)
-    for v in (centre, centre - half, centre + half):
-        visit(v)
-    for _ in range(PROFILE_REFINEMENTS):
-        best, curvature, slope, width = parabola()
-        vertex = best + (float(np.clip(-slope / (2 * curvature), -width, width)) if curvature < 0 else
-                         float(np.sign(slope) * width))  # no maximum between them: walk on up the slope
-        if curvature < 0 and abs(vertex - best) < PROFILE_SE_SHARE / np.sqrt(-2.0 * curvature):
-            break  # the maximum is located well within its standard error
-        visit(vertex)
-    best, curvature, _, _ = parabola()
-    model, fit = fixed_points(model.base, terms, peaks, config, model, fits[best][0], {**pinned, name: best})
+    best, curvature, _ = profile_maximum(log_likelihood, centre, max(half, 0.1 * step), lo, hi)
+    model, fit = fixed_points(model.base, terms, peaks, config, model, fits[best], {**pinned, name: best})
     fit.profile_se = {name: float(1.0 / np.sqrt(-2.0 * curvature)) if curvature < 0 else float("nan")}
     return model, fit
