@@ -40,3 +40,16 @@ def test_a_profile_rising_to_a_bound_ends_there_without_a_curvature():
     best, curvature, _ = profile_maximum(lambda v: 100.0 * v, 0.0, SCALE, -0.2, 0.05)
     assert best == 0.05
     assert curvature > -1e-6  # no peak: a standard error beyond any scale
+
+
+def test_a_profile_started_at_a_bound_takes_three_points_inside_it():
+    # a later round's profile starts at an earlier one's maximum, which may sit at the bound: the point
+    # beyond it merges with it, and a parabola through two points is no parabola
+    import warnings
+
+    mode, se = 0.005, 0.004
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        best, curvature, values = profile_maximum(lambda v: -0.5 * ((v - mode) / se) ** 2, 0.2, 0.0175, -0.2, 0.2)
+    assert best == pytest.approx(mode, abs=PROFILE_SE_SHARE * se)
+    assert curvature == pytest.approx(-0.5 / se**2, rel=1e-6)

@@ -181,7 +181,9 @@ def profile_maximum(log_likelihood, centre: float, half: float, lo: float, hi: f
         curvature, slope, _ = np.polyfit(np.array(three) - best, [values[u] for u in three], 2)
         return best, float(curvature), float(slope), max(three) - min(three)
 
-    for v in (centre, centre - half, centre + half):
+    for v in (centre, centre - half, centre + half, centre - 2 * half, centre + 2 * half):
+        if len(values) == 3:  # the last two only where a bound merged two of the first (a start at a bound)
+            break
         visit(v)
     for _ in range(refinements):
         best, curvature, slope, width = parabola()
