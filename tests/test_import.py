@@ -199,6 +199,7 @@ def _calibrated_misalignment(case, moving_bed="auto") -> tuple[float, float]:
     return r.heading_misalignment_rad, r.heading_misalignment_se_rad
 
 
+@pytest.mark.slow  # 8 s: `make test-slow`, CI's second step
 def test_real_heading_misalignment_follows_a_turned_reference(imported):
     """On a real moving-boat file, turning the GNSS velocities by 40 degrees turns the calibrated
     heading misalignment by 40 degrees (within 3 SE; the bed, a true-Earth velocity, turns with

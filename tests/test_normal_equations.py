@@ -467,6 +467,7 @@ def test_field_selftest_says_why_an_error_was_not_named():
         "under the file's detection limit (1 s: its own delay peak; BIC")
 
 
+@pytest.mark.slow  # 11 s: `make test-slow`, CI's second step
 def test_detection_limit_is_the_size_the_selection_takes():
     """The clean run's detection limit (HAC standard error times sqrt(k log n + margin)) splits the
     sizes the diagnosis names from those it cannot: three times it is named, a third of it is not."""

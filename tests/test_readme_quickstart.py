@@ -31,6 +31,7 @@ def _commands(block: str, verbs=("import", "calibrate")) -> list[list[str]]:
     return out
 
 
+@pytest.mark.slow  # 11 s: `make test-slow`, CI's second step
 def test_readme_quick_start_prints_what_the_readme_says(tmp_path, monkeypatch, capsys):
     real("winriver02_transect.PD0")
     text = README.read_text()
