@@ -533,3 +533,33 @@ def test_eliminating_local_unknowns_gives_the_dense_uncertainty():
     assert len(said) == 1 and said[0].startswith("1 direction(s)") and said[0].endswith(": d alone")
     with pytest.raises(ValueError, match="navigation"):
         uncertainty(J, A, names, scale, {"navigation": local[:-1]})
+
+
+def test_errors_that_need_a_reference_are_those_written_into_it_or_seen_only_against_it():
+    from adcpdyn.estimators.diagnosis.field_errors import FIELD_ERRORS, NEEDS_REFERENCE, needs_reference
+    from adcpdyn.models.effects import get_effect
+
+    for error, (effect, _, _) in FIELD_ERRORS.items():
+        assert needs_reference(error) == (error in NEEDS_REFERENCE or get_effect(effect).needs_reference)
+    assert needs_reference("compass_offset_deg") and not needs_reference("heave_m_s")
+
+
+@pytest.mark.slow  # a field self-test: `make test-slow`, CI's second step
+def test_field_selftest_without_a_reference_does_not_try_a_compass_offset():
+    """Without a moving reference a constant compass offset turns every velocity alike: nothing tells it,
+    so the self-test lists it as not tried (with the bed and the reference latency) and reports no
+    detection limit for it, where a linearised signal limit would have given one."""
+    from adcpdyn.cases.scenario import get_scenario
+    from adcpdyn.cases.simulation import simulate
+    from adcpdyn.estimators.diagnosis.diagnose import DiagnosisConfig
+    from adcpdyn.estimators.diagnosis.field_selftest import field_selftest, format_field_selftest
+
+    sc = get_scenario("diag_boat")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=40.0)), seed=3)
+    case = case.replace(reference=None)
+    res = field_selftest(case, None, DiagnosisConfig(effects=("heave", "compass_offset")),
+                         sizes={"compass_offset_deg": [4.0], "heave_m_s": [0.15], "moving_bed_m_s": [0.3]})
+    assert [r["error"] for r in res["rows"]] == ["clean", "heave_m_s"]
+    assert res["skipped"] == ["compass_offset_deg", "moving_bed_m_s"]
+    assert "compass_offset_deg" not in res["rows"][0]["signal_limits"]
+    assert "- compass_offset_deg: not tried (needs a moving reference velocity)" in format_field_selftest(res)

@@ -15,6 +15,7 @@ from ...cases.case import Case
 from ...cases.sound_speed import rescale_sound_speed
 from ..calibration.moving_bed_decision import mean_flow
 from ..run_setup import has_moving_reference
+from ...models.effects import get_effect
 
 FIELD_ERRORS = {  # name -> (catalog effect, unit, typical sizes)
     "compass_offset_deg": ("compass_offset", "deg", (2.0, 4.0)),
@@ -58,6 +59,15 @@ def detection_limit(error: str, limits: dict) -> float | None:
 
 
 NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
+
+
+def needs_reference(error: str) -> bool:
+    """Whether ``error`` shows only against a moving reference velocity: written into it
+    (:data:`NEEDS_REFERENCE`), or named by a catalog effect observable only against one. A constant
+    compass offset turns every velocity alike, which without an Earth-frame reference nothing tells
+    (RDI_withBT, no GNSS: its signal limit had read 7.5 deg, the linearised walk's prior rows taking
+    the turned velocity increments for a misfit, where turning them costs nothing)."""
+    return error in NEEDS_REFERENCE or get_effect(FIELD_ERRORS[error][0]).needs_reference
 
 
 def injected_values(cases, error: str, size: float, calibration=None) -> dict:

@@ -17,7 +17,7 @@ from ..calibration.record import CalibrationRecord
 from .config import DiagnosisConfig, holding
 from .diagnose import calibration_own_effects, diagnose
 from ..run_setup import has_moving_reference
-from .field_errors import FIELD_ERRORS, NEEDS_REFERENCE, detection_limit, estimate_z, inject_survey, injected_values
+from .field_errors import FIELD_ERRORS, detection_limit, estimate_z, inject_survey, injected_values, needs_reference
 from . import model_cache
 from .own_effects import find_own_effects
 from .signal_limit import own_delay_profile, signal_limit
@@ -41,7 +41,7 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
     case = runs[0] if len(runs) == 1 else runs  # what diagnose, the limits and the signatures take
     moving = all(has_moving_reference(c) for c in runs)
     trials = [("clean", 0.0)] + [(e, float(s)) for e, ss in sizes.items() for s in ss
-                                 if moving or e not in NEEDS_REFERENCE]
+                                 if moving or not needs_reference(e)]
     graphs = model_cache.stats()
     tic = time.perf_counter()
     first = diagnose(case, config, calibration=calibration)  # the calibration's own effects held, where they apply
@@ -108,7 +108,7 @@ def field_selftest(case, calibration: CalibrationRecord | None, config: Diagnosi
             "navigation": first.base["navigation"], "own_effects": list(own["effects"]),
             "own_effects_from": "calibration" if own is recorded else "found here",
             "model_graphs": {k: v - graphs[k] for k, v in model_cache.stats().items() if k in ("hits", "misses")},
-            "skipped": sorted(set(NEEDS_REFERENCE) & set(sizes)) if not moving else []}
+            "skipped": sorted(e for e in sizes if needs_reference(e)) if not moving else []}
 
 
 def default_sizes(config: DiagnosisConfig) -> dict:
