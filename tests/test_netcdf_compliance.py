@@ -133,6 +133,7 @@ def test_attribution_file_errors_and_misplaced_option(tmp_path, capsys):
         api.correct(case_path, "asc", attribution=Attribution())
 
 
+@pytest.mark.slow  # 6 s: `make test-slow`, CI's second step
 def test_a_correction_records_when_its_calibration_was_made(tmp_path):
     """The adcp variable's calibration_date is the applied CALIB.json's written_utc (ISO 8601, as IOOS asks);
     a correction without a calibration claims none."""

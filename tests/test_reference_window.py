@@ -67,6 +67,7 @@ def test_a_window_ending_before_it_starts_is_refused_in_one_line(tmp_path):
         write_case(case.replace(reference=dataclasses.replace(case.reference, window_s=w[:, :1])), tmp_path / "bad.h5")
 
 
+@pytest.mark.slow  # 7 s: `make test-slow`, CI's second step
 def test_the_window_model_fits_differenced_fixes_that_a_point_model_misses():
     """A boat changing speed every 3 s, fixes every 4-6 s with 1 cm/s noise, on the base that follows it
     (a velocity per ping): read as window means the fixes fit at their noise; read as instantaneous
