@@ -53,3 +53,10 @@ def test_a_profile_started_at_a_bound_takes_three_points_inside_it():
         best, curvature, values = profile_maximum(lambda v: -0.5 * ((v - mode) / se) ** 2, 0.2, 0.0175, -0.2, 0.2)
     assert best == pytest.approx(mode, abs=PROFILE_SE_SHARE * se)
     assert curvature == pytest.approx(-0.5 / se**2, rel=1e-6)
+
+
+def test_a_flat_profile_stops_where_it_started():
+    seen = []
+    best, curvature, values = profile_maximum(lambda v: seen.append(v) or -3.0, 0.0, SCALE, -0.2, 0.2)
+    assert best in (0.0, -SCALE, SCALE) and curvature == pytest.approx(0.0, abs=1e-6)
+    assert len(seen) == 3 and all(np.isfinite(seen))

@@ -187,15 +187,19 @@ def profile_maximum(log_likelihood, centre: float, half: float, lo: float, hi: f
         visit(v)
     for _ in range(refinements):
         best, curvature, slope, width = parabola()
-        step = -slope / (2 * curvature) if curvature < 0 else np.sign(slope) * np.inf  # else walk on up the slope
-        se = 1.0 / np.sqrt(-2.0 * curvature) if curvature < 0 else np.inf
-        if abs(step) < PROFILE_SE_SHARE * se:
-            if width <= PROFILE_WIDTH_SE * se:
-                break  # the maximum is located well within its standard error, by points near enough to give it
-            for v in (best - se, best + se):  # a wide parabola's curvature understates a peak's
+        if curvature >= 0:  # no maximum between them: walk on up the slope (a flat profile has none to walk)
+            if slope == 0:
+                break
+            visit(best + float(np.sign(slope)) * width)
+            continue
+        step, se = -slope / (2 * curvature), 1.0 / np.sqrt(-2.0 * curvature)
+        if abs(step) >= PROFILE_SE_SHARE * se:
+            visit(best + float(np.clip(step, -width, width)))
+        elif width > PROFILE_WIDTH_SE * se:  # a wide parabola's curvature understates a peak's
+            for v in (best - se, best + se):
                 visit(v)
         else:
-            visit(best + float(np.clip(step, -width, width)))
+            break  # the maximum is located well within its standard error, by points near enough to give it
     best, curvature, _, _ = parabola()
     return best, curvature, values
 
