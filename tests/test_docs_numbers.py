@@ -196,3 +196,18 @@ def test_status_page_figures_read_the_committed_runs():
                    f"at {correction['deep_ocean']['rootfinder_over_asc']:.2f} of ASC's throughput",
                    f"({coverage[2]:.2f}, {coverage[3]:.2f}) with the compass deviation drawn from the calibration's prior"):
         assert figure in status, figure
+
+
+def test_real_files_paragraph_reads_the_committed_run():
+    """docs/diagnosis.md's prose on the real files' run: the top-1 count and the sound speed the profile mend
+    named on winriver01 (estimate and SE), formatted from the committed JSON."""
+    res = _result("diagnosis_random_walk.json")
+    s = res["summary"]["random_walk"]
+    page = " ".join((ROOT / "docs" / "diagnosis.md").read_text().split())
+    hits = round(s["top1"] * s["n_injected"])
+    assert f"Top-1 {hits} of {s['n_injected']} ({100 * s['top1']:.0f} %)" in page
+    row = next(r for r in res["rows"] if r["file"] == "winriver01.PD0" and r["error"] == "sound_speed_relative"
+               and r["size"] == 0.04)
+    key = "sound_speed_error.relative_error"
+    assert row["hit"]
+    assert f"{row['estimate'][key]:.4f} +- {row['se'][key]:.4f}" in page
