@@ -58,16 +58,16 @@ def detection_limit(error: str, limits: dict) -> float | None:
     return float(max(found)) if found else None
 
 
-NEEDS_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # written into the reference velocity
+WRITTEN_INTO_REFERENCE = ("reference_latency_s", "moving_bed_m_s")  # injected into the reference velocity
 
 
 def needs_reference(error: str) -> bool:
     """Whether ``error`` shows only against a moving reference velocity: written into it
-    (:data:`NEEDS_REFERENCE`), or named by a catalog effect observable only against one. A constant
+    (:data:`WRITTEN_INTO_REFERENCE`), or named by a catalog effect observable only against one. A constant
     compass offset turns every velocity alike, which without an Earth-frame reference nothing tells
     (RDI_withBT, no GNSS: its signal limit had read 7.5 deg, the linearised walk's prior rows taking
     the turned velocity increments for a misfit, where turning them costs nothing)."""
-    return error in NEEDS_REFERENCE or get_effect(FIELD_ERRORS[error][0]).needs_reference
+    return error in WRITTEN_INTO_REFERENCE or get_effect(FIELD_ERRORS[error][0]).needs_reference
 
 
 def injected_values(cases, error: str, size: float, calibration=None) -> dict:
@@ -158,7 +158,7 @@ def inject(case: Case, error: str, size: float, bed_rad: float | None = None) ->
     """
     if error not in FIELD_ERRORS:
         raise ValueError(f"error: expected one of {sorted(FIELD_ERRORS)}, got {error!r}")
-    if error in NEEDS_REFERENCE and not has_moving_reference(case):
+    if error in WRITTEN_INTO_REFERENCE and not has_moving_reference(case):
         raise ValueError(f"error: {error} needs a moving reference velocity; {case.name} has none")
     att, ref = case.attitude, case.reference
     if error == "compass_offset_deg":
