@@ -32,6 +32,8 @@ CHECK_RTOL = 1e-9
 PARTS = ("_z", "_x_of_z", "_p", "_w", "_d", "_groups", "residual_fun", "jacobian_fun", "raw_fun", "constraint_fun",
          "weighted_fun", "nlp", "solver")
 _kept: OrderedDict = OrderedDict()  # shape key -> [Built]
+_lock = threading.Lock()
+_stats = {"hits": 0, "misses": 0, "rejected": 0}
 
 
 @dataclass(eq=False)
@@ -49,8 +51,6 @@ class Built:
     def of(cls, model) -> "Built":
         return cls({name: getattr(model, name) for name in PARTS}, model.scale.size, model.data.size,
                    model.constant.copy())
-_lock = threading.Lock()
-_stats = {"hits": 0, "misses": 0, "rejected": 0}
 
 
 def capacity() -> int:
