@@ -292,7 +292,7 @@ def test_cli_diagnose_writes_the_report(tmp_path, latency_diagnosis):
     assert {"channel", "score", "detail"} <= set(d["where"][0])
     assert {"effect", "delta_ll", "delta_bic", "p_value", "params", "params_se", "gap_after",
             "shrink_fraction"} <= set(d["ranking"][0])
-    assert out.with_suffix(".md").exists() and (tmp_path / f"{case.name}_residuals.png").exists()
+    assert out.with_suffix(".md").exists() and (tmp_path / "diag_residuals.png").exists()
     assert main(["diagnose", str(path), "--out", str(path)]) == 2  # never overwrites the input
 
 

@@ -221,8 +221,9 @@ def test_diagnosis_figure_hz_up_to_the_pings_nyquist_channels_in_order_readable(
         assert texts[:2] == ["base model", "with attitude_latency"] and texts[-1].endswith("Hz")
     finally:
         plt.close(fig)
-    written = report.figures(result, tmp_path, "png")
-    assert written == [tmp_path / f"{case.name}_residuals.png"] and written[0].stat().st_size > 10_000
+    written = report.figures(result, tmp_path / "first.json", "png") + report.figures(result, tmp_path / "second.json", "png")
+    assert written == [tmp_path / "first_residuals.png", tmp_path / "second_residuals.png"]  # one run, two reports: two figures
+    assert all(w.stat().st_size > 10_000 for w in written)
 
 
 def test_channel_order_and_labels_of_a_joint_diagnosis():

@@ -372,17 +372,16 @@ def residual_figure(result):
     return fig
 
 
-def figures(result, folder, fmt: str = "png") -> list[Path]:
-    """The held-out residual figure (:func:`residual_figure`), written as
-    ``RUN_residuals.FMT`` (``RUN_and_N_more_residuals.FMT`` for several runs) in ``folder``
-    (``fmt``: png, pdf or svg)."""
+def figures(result, path, fmt: str = "png") -> list[Path]:
+    """The held-out residual figure (:func:`residual_figure`), written as ``STEM_residuals.FMT``
+    beside ``path`` (DIAG.json: ``DIAG_residuals.png``), so that two diagnoses written into one
+    folder keep their own figures (``fmt``: png, pdf or svg)."""
     import matplotlib.pyplot as plt
 
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig = residual_figure(result)
-    stem = result.runs[0] + (f"_and_{len(result.runs) - 1}_more" if len(result.runs) > 1 else "") if result.runs else result.case
-    out = folder / f"{stem}_residuals.{fmt}"
+    out = path.with_name(f"{path.stem}_residuals.{fmt}")
     try:
         with atomic_path(out, suffix=f".{fmt}") as tmp:
             fig.savefig(tmp, dpi=100, format=fmt)
@@ -398,4 +397,4 @@ def write_report(result, json_path, fmt: str = "png") -> list[Path]:
     md = json_path.with_suffix(".md")
     with atomic_path(md) as tmp:
         Path(tmp).write_text(table(result))
-    return [json_path, md] + figures(result, json_path.parent, fmt)
+    return [json_path, md] + figures(result, json_path, fmt)
