@@ -3,7 +3,8 @@
 Roll and pitch (of whatever frame the sensor sits in) share damped modes
 (:mod:`adcpdyn.models.motion`), added greedily: the strongest Lomb-Scargle peak of
 the current residuals seeds a new mode (irregular sample times keep the true peak
-above its aliases even below the mean Nyquist rate), each axis' (C, S) and bias
+above its aliases even below the mean Nyquist rate; regular ones are searched up to
+their Nyquist frequency, :func:`resolved_omega`), each axis' (C, S) and bias
 follow by linear least squares over a small decay grid, then everything is refined
 by nonlinear least squares; a mode is kept when it lowers the Bayesian information
 criterion by more than ``BIC_MARGIN``. Yaw is then linear in its parameters (trend
@@ -28,6 +29,9 @@ BIC_MARGIN = 10.0
 DECAY_GRID_1_S = (0.0, 0.03, 0.1, 0.3, 1.0)
 MAX_DECAY_1_S = 3.0
 MAX_OMEGA_RAD_S = 16.0
+ALIAS_WINDOW = 0.9  # a frequency where the samples' spectral window is this coherent aliases zero frequency
+WINDOW_SAMPLES = 1000  # the window is a property of the sampling: its first samples tell it
+MAX_TILT_AMPLITUDE_RAD = np.pi / 2  # a roll or pitch mode beyond a quarter turn is no motion: an alias the samples do not bound
 PERIODOGRAM_SAMPLES = 800
 DENSE_NYQUIST_FRACTION = 0.75  # long records sampled this densely get FFT candidates
 
@@ -144,6 +148,20 @@ def _design(t, modes, t_ref):
     return np.column_stack(cols)
 
 
+def resolved_omega(t) -> float:
+    """The highest mode frequency (rad/s) the sample times ``t`` tell from its aliases: pi / dt (the
+    Nyquist frequency of their median interval dt) where their spectral window |mean exp(i w t_k)|
+    at w = 2 pi / dt exceeds ``ALIAS_WINDOW`` (every sample at nearly one phase: a mode of w looks
+    like a constant and one of w - v like one of v), else ``MAX_OMEGA_RAD_S`` (jittered pings resolve
+    modes above their mean Nyquist rate)."""
+    t = np.sort(np.asarray(t, dtype=float))[:WINDOW_SAMPLES]
+    dt = float(np.median(np.diff(t))) if t.size > 2 else 0.0
+    if dt <= 0:
+        return MAX_OMEGA_RAD_S
+    window = abs(np.exp(2j * np.pi / dt * (t - t[0])).mean())
+    return float(min(MAX_OMEGA_RAD_S, np.pi / dt)) if window > ALIAS_WINDOW else MAX_OMEGA_RAD_S
+
+
 def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = None, omega_band=None) -> ModeFit:
     """Shared damped modes of one or more angle series (columns of Y, radians).
 
@@ -157,7 +175,7 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
     Y = np.atleast_2d(np.asarray(Y, dtype=float).T).T
     M, A = Y.shape
     duration = t[-1] - t[0]
-    lo, hi = omega_band or (max(2 * np.pi * 2 / duration, 0.2), MAX_OMEGA_RAD_S)
+    lo, hi = omega_band or (max(2 * np.pi * 2 / duration, 0.2), resolved_omega(t))
     scale = np.maximum(np.std(Y, axis=0), 1e-6)
     modes = np.zeros((0, 2))
     coef = np.linalg.lstsq(_design(t, modes, t_ref), Y, rcond=None)[0]  # (1 + 2n, A)
@@ -166,7 +184,7 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
     target = fixed_modes if fixed_modes is not None else max_modes
     for k in range(1, target + 1):
         resid = Y - _design(t, modes, t_ref) @ coef
-        if np.ptp(resid) == 0:
+        if np.ptp(resid) == 0 or lo >= hi:  # nothing left, or no frequency the samples resolve
             break
         omega = periodogram_peak(t, resid / scale, lo, hi)
         best = None
@@ -201,6 +219,10 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
         rss_k = float(2 * sol.cost)
         bic_k = _bic(rss_k, M * A, len(q0))
         trail.append({"modes": k, "bic": bic_k})
+        amplitude = np.hypot(*sol.x[2 * k:].reshape(A, 1 + 2 * k)[:, 1:].reshape(A, k, 2).transpose(2, 0, 1))
+        if np.max(amplitude) > MAX_TILT_AMPLITUDE_RAD:  # e.g. a mode at the sampling rate (every sample at one phase)
+            trail[-1].update(rejected=True, why=f"amplitude {np.max(amplitude):.3g} rad: not bounded by the samples")
+            break
         if fixed_modes is None and bic_k > trail[-2]["bic"] - BIC_MARGIN:
             trail[-1]["rejected"] = True
             break

@@ -648,3 +648,19 @@ def test_a_real_run_whose_bed_would_move_upstream_keeps_its_heading_error_in_the
     kept = api.calibrate(case, n_starts=4, own_effects="off", moving_bed="constant")  # as asked: kept, and said
     assert kept.moving_bed == "constant" and kept.moving_bed_test is None
     assert any(w.startswith("moving bed kept as asked (--moving-bed constant) moves towards") for w in kept.warnings)
+
+
+def test_attitude_prefit_searches_regular_samples_up_to_their_nyquist_only():
+    """Regular samples every dt resolve modes up to pi / dt (beyond it a mode is its alias: RDI_withBT's
+    1.5-s samples had given a 4.1 rad/s roll mode of amplitude 66 rad); jittered pings resolve more."""
+    from adcpdyn.estimators.attitude_fit import MAX_OMEGA_RAD_S, MAX_TILT_AMPLITUDE_RAD, fit_modes, resolved_omega
+
+    t = np.arange(400) * 1.5
+    assert resolved_omega(t) == np.pi / 1.5
+    jittered = np.cumsum(np.random.default_rng(0).uniform(0.64, 0.95, 60))
+    assert resolved_omega(jittered) == MAX_OMEGA_RAD_S
+    rng = np.random.default_rng(1)
+    y = 0.03 * np.sin(1.2 * t) + 0.01 * rng.standard_normal(t.size)  # a 1.2 rad/s roll, under pi / 1.5
+    f = fit_modes(t, np.column_stack([y, 0.5 * y]), 0.0)
+    assert f.modes.shape[0] >= 1 and abs(f.modes[0, 0] - 1.2) < 0.01
+    assert np.all(np.hypot(f.cs[..., 0], f.cs[..., 1]) < MAX_TILT_AMPLITUDE_RAD)
