@@ -219,9 +219,10 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
         rss_k = float(2 * sol.cost)
         bic_k = _bic(rss_k, M * A, len(q0))
         trail.append({"modes": k, "bic": bic_k})
-        amplitude = np.hypot(*sol.x[2 * k:].reshape(A, 1 + 2 * k)[:, 1:].reshape(A, k, 2).transpose(2, 0, 1))
-        if np.max(amplitude) > MAX_TILT_AMPLITUDE_RAD:  # e.g. a mode at the sampling rate (every sample at one phase)
-            trail[-1].update(rejected=True, why=f"amplitude {np.max(amplitude):.3g} rad: not bounded by the samples")
+        cs = sol.x[2 * k:].reshape(A, 1 + 2 * k)[:, 1:].reshape(A, k, 2)  # per axis, per mode: (C, S)
+        amplitude = float(np.hypot(cs[..., 0], cs[..., 1]).max())
+        if amplitude > MAX_TILT_AMPLITUDE_RAD:  # e.g. a mode at the sampling rate (every sample at one phase)
+            trail[-1].update(rejected=True, why=f"amplitude {amplitude:.3g} rad: not bounded by the samples")
             break
         if fixed_modes is None and bic_k > trail[-2]["bic"] - BIC_MARGIN:
             trail[-1]["rejected"] = True
