@@ -178,7 +178,10 @@ def profile_maximum(log_likelihood, centre: float, half: float, lo: float, hi: f
         # written in: 0, -0.01 and -0.03 nearest -0.03 while -0.06 lay beyond it: its vertex was never visited)
         three = ([max(below), best, min(above)] if below and above else
                  sorted(sorted(values, key=lambda u: abs(u - best))[:3]))
-        curvature, slope, _ = np.polyfit(np.array(three) - best, [values[u] for u in three], 2)
+        level = np.array([values[u] for u in three])
+        if np.ptp(level) <= 1e-12 * max(1.0, float(np.max(np.abs(level)))):  # flat: the fit's round-off is no slope
+            return best, 0.0, 0.0, max(three) - min(three)
+        curvature, slope, _ = np.polyfit(np.array(three) - best, level, 2)
         return best, float(curvature), float(slope), max(three) - min(three)
 
     for v in (centre, centre - half, centre + half, centre - 2 * half, centre + 2 * half):
