@@ -195,6 +195,10 @@ class SolverOptions:
         opts = {
             "expand": self.expand,
             "print_time": False,
+            # a trial point where the model is NaN (a step out of its domain) is IPOPT's to cut back, and each
+            # start's status says how it ended: CasADi's warning line per such point only alarms (print_level
+            # > 0 shows them)
+            "show_eval_warnings": self.print_level > 0,
             "ipopt.print_level": self.print_level,
             "ipopt.sb": "yes",
             "ipopt.max_iter": self.max_iter,
@@ -236,7 +240,7 @@ def casadi_options(options, hessian: str) -> dict:
     ``hessian`` already resolved (``gauss-newton`` means a ``hess_lag`` the caller adds)."""
     m, tol, it = options.method, options.tol, options.max_iter
     verbose = options.print_level > 0
-    opts = {"expand": options.expand, "print_time": False}
+    opts = {"expand": options.expand, "print_time": False, "show_eval_warnings": verbose}  # as IPOPT's
     if options.jit:
         opts.update(JIT_OPTIONS)
     if m in ("sqpmethod", "feasiblesqpmethod"):

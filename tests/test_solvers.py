@@ -109,6 +109,19 @@ def test_a_solver_error_is_a_failed_start_with_its_reason():
     assert [s.status for s in ms.starts] == ["error: Cannot load 'libhsl.so'"] * 2
 
 
+def test_trial_points_out_of_the_models_domain_are_the_starts_status_not_a_warning_per_point(capfd):
+    # sqrt(x) + x^2 from x = 1: IPOPT's Newton step lands at x < 0, where f is NaN, again and again
+    x = ca.MX.sym("x")
+    nlp = {"x": x, "p": ca.MX.sym("p", 0), "f": ca.sqrt(x) + x**2, "g": ca.MX(0, 1)}
+    for level in (0, 1):
+        solver = build_solver(nlp, SolverOptions(hessian="exact", print_level=level, max_iter=30))
+        ms = multistart(solver, np.ones((1, 1)), -np.ones(1), np.ones(1), np.zeros(0), np.zeros(0), np.zeros(0),
+                        progress=False)
+        captured = capfd.readouterr()
+        assert ("NaN detected" in captured.out + captured.err) == (level > 0)
+        assert not ms.success and ms.starts[0].status != "Solve_Succeeded"
+
+
 def test_least_squares_method_without_residuals_is_a_clear_error():
     nlp, *_ = _linear_problem()
     with pytest.raises(ValueError, match=r"^SolverOptions\.method: 'least_squares-trf' solves the residuals"):
