@@ -431,6 +431,25 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
     assert np.max(np.abs(a.x - s.x)[np.isfinite(se)] / se[np.isfinite(se)]) < 1e-2
 
 
+
+def test_a_small_graph_whose_symbolic_jacobian_is_costly_is_assembled():
+    """`--jacobian auto` assembles a graph under ASSEMBLED_MIN_NODES whose symbolic Jacobian is costly
+    (a motion model in deep water reaches every row: nodes x forward directions), and the cost estimate
+    follows the operations CasADi counts in the symbolic Jacobian it stands for; a shorter run of the
+    same boat stays symbolic."""
+    from adcpdyn.estimators.calibration.problem import (ASSEMBLED_MIN_COST, ASSEMBLED_MIN_NODES,
+                                                        symbolic_jacobian_cost)
+
+    sc = get_scenario("deep_ship")
+    for seconds, costly in ((10.0, False), (25.0, True)):
+        case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=seconds)), seed=2)
+        symbolic = CalibrationProblem(case, CalibrationConfig(n_starts=2, jacobian="symbolic"))
+        cost = symbolic_jacobian_cost(symbolic.model)
+        assert symbolic.model.assembled_nodes < ASSEMBLED_MIN_NODES and symbolic.timing == "deep"
+        assert 0.25 < symbolic.jacobian_fun.n_instructions() / cost < 1.0
+        assert (cost > ASSEMBLED_MIN_COST) == costly
+        auto = CalibrationProblem(case, CalibrationConfig(n_starts=2, compile="never"))
+        assert auto.assembled == costly and not auto.model.compiled
 def test_static_correction_with_undetermined_installation_uses_the_nominal_angles_and_says_so():
     from adcpdyn.estimators.asc import asc
     from adcpdyn.estimators.calibration.record import as_record

@@ -119,7 +119,9 @@ class CalibrationConfig:
         Residual Jacobian (Gauss-Newton Hessian, standard errors): ``symbolic`` (the whole
         problem expanded to SX and differentiated by CasADi), ``assembled`` (per-row
         Jacobians chained numerically, :mod:`.row_jacobian`; MX problem) or ``auto``
-        (assembled above ``ASSEMBLED_MIN_NODES`` expanded nodes: long runs, deep water).
+        (assembled above ``ASSEMBLED_MIN_NODES`` expanded nodes, long runs and deep water, or where the
+        nodes times the Jacobian's forward directions exceed ``ASSEMBLED_MIN_COST``: a motion model's
+        parameters reach every row).
     compile : str
         The assembled problem's per-ping model (bottom track with its gradient, per-row
         Jacobians) as machine code from the per-machine cache (:mod:`~adcpdyn.solvers.compiled`,

@@ -58,6 +58,14 @@ MIN_RESIDUAL_LAG1 = 0.5  # |lag-1 autocorrelation| above which a residual is mot
 DECLINATION_SPAN_RAD = np.radians(1.0)  # runs' declinations farther apart than a survey's site spreads them
 DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the motion period
 ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is assembled per row
+# the symbolic Jacobian costs about its expanded nodes times its forward directions (the colours of its pattern: a
+# motion model's parameters reach every row): above this product it is assembled (and compiled) too. Measured with
+# 24 starts (2026-12-02; `estimators.calibration.problem.symbolic_jacobian_cost`): a 62-s window of winriver02
+# (123 pings, the motion model in deep water: 343k nodes x 47 colours, 16e6; its symbolic Jacobian 69 ms an
+# evaluation against 3 ms assembled, 4 starts 157 s -> 24 s), the next window (219 pings, 7e6) 14.6 -> 1.8 s,
+# RiverPro_test01 (3.6e6) 6.6, 5.2 -> 3.4, 3.1 s (4.8 s with an empty cache), the simulated river_survey (2.7e6)
+# 3.3, 3.2 -> 2.4, 2.4 s; pool_m1 (57 pings, 1.9e6) loses, 3.7 -> 6.2 s
+ASSEMBLED_MIN_COST = 2_300_000
 # pings (all runs) from which --compile auto compiles the per-ping models (and so assembles the Jacobian): 8 starts
 # warm, 501 pool_m0 pings 2.1 -> 0.8 s, deep_ship (601) 30.7 -> 9.4 s; winriver02 (830, 24 starts) 19.4 -> 6.3 s,
 # 10.9 s with an empty cache (its six models compiled once per machine); below, winriver01 (261) gains 15.8 -> 10.1 s
@@ -142,6 +150,12 @@ def _beyond_sensor_noise(fit: AttitudeFit) -> np.ndarray:
 
 
 
+def symbolic_jacobian_cost(model: SurveyModel) -> int:
+    """About the operations of one evaluation of the symbolic residual Jacobian: the expanded graph's
+    nodes times the forward directions its sparsity pattern needs (CasADi's column colouring)."""
+    return model.assembled_nodes * ca.jacobian_sparsity(model.raw, model.x).uni_coloring().size2()
+
+
 class CalibrationProblem:
     """The joint NLP of one run, or of several runs of one boat: built once, solved from many starts.
 
@@ -206,8 +220,9 @@ class CalibrationProblem:
         compile_min = {"always": 0, "never": None}.get(config.compile, COMPILE_MIN_PINGS)
         symbolic = config.jacobian == "symbolic"  # compiled models are not expanded to SX
         self.model = model = SurveyModel(runs, spec, compile_min_pings=None if symbolic else compile_min)
-        if config.compile == "auto" and config.jacobian == "auto" and not model.compiled and \
-                model.assembled_nodes > ASSEMBLED_MIN_NODES:  # assembled anyway: its per-row Jacobians compiled
+        costly = config.jacobian == "auto" and not model.compiled and (
+            model.assembled_nodes > ASSEMBLED_MIN_NODES or symbolic_jacobian_cost(model) > ASSEMBLED_MIN_COST)
+        if config.compile == "auto" and costly:  # assembled anyway: its per-row Jacobians compiled
             self.model = model = SurveyModel(runs, spec, compile_min_pings=0)
         u = model.unknowns
         self.names, self.scale, self.lbx, self.ubx = list(u.names), u.scale, u.lower, u.upper
@@ -220,8 +235,7 @@ class CalibrationProblem:
         z = ca.MX.sym("z", x.shape[0])
         raw = model.raw
         # compiled models are evaluated by the assembled Jacobian (jacobian 'symbolic' compiles nothing)
-        self.assembled = config.jacobian == "assembled" or model.compiled or (
-            config.jacobian == "auto" and model.assembled_nodes > ASSEMBLED_MIN_NODES)
+        self.assembled = config.jacobian == "assembled" or model.compiled or costly
         self.threads = default_threads(config.workers, config.n_starts) if self.assembled else 1
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
         weights = ca.MX.sym("w", raw.shape[0])
