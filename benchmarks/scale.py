@@ -76,7 +76,10 @@ def print_scale(res: dict) -> None:
     t = big[0]["calibration_s"] if big else float("nan")
     label = "calibration of 1e5 pings < 10 s" + ("" if big else " (1e5 not run: see above)")
     b = last.get("calibration_s", float("nan"))
+    peak = big[0]["peak_rss_mb"] if big else float("nan")
     print_targets(res, [Target(label, t, bool(big) and t < 10.0),
+                        Target("calibration of 1e5 pings: peak memory < 2 GB (MB; the process's, its simulation included)",
+                               peak, bool(big) and peak < 2000.0),
                         Target(f"calibration cost grows no faster than linearly (exponent between the two largest sizes "
                                f"<= {1 + LINEAR_TOLERANCE:.1f})", b, bool(np.isfinite(b)) and b <= 1 + LINEAR_TOLERANCE)])
 
