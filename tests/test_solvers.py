@@ -197,3 +197,20 @@ def test_the_gauss_newton_hessian_is_dense_only_for_few_velocity_columns():
     assert not dense_gram(jacobian(3001, 90))
     assert not dense_gram(SimpleNamespace(n_z=10))  # no blocks to form it from
 
+
+
+def test_a_best_that_one_start_alone_reached_is_said_to_be_unconfirmed():
+    from adcpdyn.estimators.calibration.problem import lone_best
+    from adcpdyn.solvers.multistart import combine_starts
+
+    def starts(objectives, xs):
+        return [(dict(index=i, objective=f, iterations=10, time_s=0.1, status="Solve_Succeeded", success=True),
+                 (np.array(x, dtype=float), np.zeros(0), np.zeros(0), np.zeros(2)))
+                for i, (f, x) in enumerate(zip(objectives, xs))]
+
+    spread = combine_starts(starts([4.0, 1.0, 3.0, 2.0], [[0, 0], [1, 0], [2, 0], [3, 0]]), 2)
+    assert spread.best_start == 1 and spread.n_groups == 4
+    assert "only 1 of 4 starts reached the best objective, the others ended at 3 other" in lone_best(spread)
+    confirmed = combine_starts(starts([1.0, 1.0, 3.0, 2.0], [[1, 0], [1, 0], [2, 0], [3, 0]]), 2)
+    assert lone_best(confirmed) is None  # two starts agree on the best
+    assert lone_best(combine_starts(starts([1.0, 2.0, 3.0], [[1, 0], [2, 0], [3, 0]]), 2)) is None  # too few starts

@@ -150,6 +150,21 @@ def _beyond_sensor_noise(fit: AttitudeFit) -> np.ndarray:
 
 
 
+LONE_BEST_MIN_STARTS = 4  # from this many starts, a best that only one of them reached is said to be unconfirmed
+
+
+def lone_best(ms: MultistartResult) -> str | None:
+    """The warning for a multistart whose best objective only one start reached while the others
+    ended at other local solutions: nothing confirms it is the global one (a short window's motion model,
+    a landscape of many minima), so more starts may find a better one."""
+    n = len(ms.starts)
+    if n < LONE_BEST_MIN_STARTS or ms.n_groups < 2 or round(ms.fraction_at_best * n) != 1:
+        return None
+    return (f"multistart: only 1 of {n} starts reached the best objective, the others ended at {ms.n_groups - 1} "
+            "other local solution(s): a better one may lie where no start went; rerun with more starts (--starts), "
+            "another seed (--seed)")
+
+
 def symbolic_jacobian_cost(model: SurveyModel) -> int:
     """About the operations of one evaluation of the symbolic residual Jacobian: the expanded graph's
     nodes times the forward directions its sparsity pattern needs (CasADi's column colouring)."""
@@ -394,6 +409,10 @@ class CalibrationProblem:
         result = self._result(ms)
         if unsettled:
             result.warnings.append(unsettled)
+        lone = lone_best(ms)
+        if lone:
+            result.warnings.append(lone + (" or the beams' attitude from the sensor's samples (--attitude samples)"
+                                           if self.attitude_source == "model" else ""))
         return result
 
     def _noise_fixed_point(self, ms: MultistartResult, lbz, ubz) -> tuple:
