@@ -25,6 +25,7 @@ def _numbers(path):
     return np.array(d["radius_vectors_head_m"] + [[d["objective"]] * 3], dtype=float)
 
 
+@pytest.mark.slow  # 7.6 s on 2026-12-02's host: `make test-slow`, CI's second step
 def test_calibrate_batch_serial_and_local_cluster_agree(three_cases, tmp_path, capsys):
     common = ["calibrate", str(three_cases), "--starts", "2", "--formulation", "minimal"]
     assert main(common + ["--scheduler", "none", "--out", str(tmp_path / "serial")]) == 0

@@ -99,6 +99,7 @@ def test_progress_lines_on_stderr_only_when_asked_or_on_a_terminal(calibrated, t
     assert "adcpdyn calibrate: [" not in capfd.readouterr().err
 
 
+@pytest.mark.slow  # 6.8 s on 2026-12-02's host: `make test-slow`, CI's second step
 def test_diagnose_progress_names_round_effect_and_time(tmp_path, capfd, monkeypatch):
     import dataclasses
 

@@ -434,6 +434,7 @@ def test_compass_errors_read_the_models_heading_and_correct_it_back(name, params
     assert np.abs(read[:, 0] + on_samples - psi).max() < (4e-3 if params.get("B_rad") else 1e-15)
 
 
+@pytest.mark.slow  # 7.2 s on 2026-12-02's host: `make test-slow`, CI's second step
 def test_a_nearly_as_good_effect_is_named_beside_the_chosen_one(monkeypatch):
     """Tilt low-pass on the pool boat: latency removes about three quarters of what the tilt
     low-pass removes. Named as an alternative when that share passes the bar, not otherwise."""
@@ -887,6 +888,7 @@ def test_the_delay_profiles_curvature_is_its_envelopes_not_its_ripples():
     assert envelope_parabola({0.0: 1.0, step / 2: 2.0, step: 0.5}, 0.0, step) == (0.0, 0.0)  # two on the grid
 
 
+@pytest.mark.slow  # 7.1 s on 2026-12-02's host: `make test-slow`, CI's second step
 def test_an_injected_bed_moves_downstream_where_the_run_has_a_water_profile():
     """A bed moves with the near-bed flow: the field self-test's bed goes the way of the run's mean
     water velocity in the true Earth frame (deep_ocean: a ship's ADCP turned 45 deg on its hull, the

@@ -47,6 +47,7 @@ def test_malformed_case_files_through_every_verb(fuzz):
     assert _ran(counts, "calibrate", "exit 0") >= 10 and _ran(counts, "compare", "exit 0") >= 10
 
 
+@pytest.mark.slow  # 6.7 s on 2026-12-02's host: `make test-slow`, CI's second step
 def test_malformed_calibration_files_through_every_reader(fuzz):
     folder, base = fuzz
     items = [(v, "calib_pool") for v in calibration_variants(base["calib_pool"], folder / "calibs")]

@@ -40,6 +40,7 @@ def test_a_simulated_export_with_dates_and_positions_passes_the_checker(tmp_path
         _assert_passes(path)
 
 
+@pytest.mark.slow  # 6.7 s on 2026-12-02's host: `make test-slow`, CI's second step
 def test_a_real_export_passes_the_checker(tmp_path):
     case_path = tmp_path / "rp.h5"
     api.import_file(real("RiverPro_test01.PD0"), out=case_path)

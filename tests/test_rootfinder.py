@@ -25,7 +25,8 @@ from adcpdyn.solvers.rootfinder import RootfinderOptions, error_direction, solve
 
 
 
-@pytest.mark.parametrize("scenario, timing", [("pool_m1", "deep"), ("deep_ocean", "deep"), ("deep_ocean", "exact")])
+@pytest.mark.parametrize("scenario, timing", [("pool_m1", "deep"), ("deep_ocean", "deep"),
+                                             pytest.param("deep_ocean", "exact", marks=pytest.mark.slow)])  # 6.5 s
 def test_exact_solve_equals_scipy_root_ping_by_ping(scenario, timing):
     """Noisy radials (a nonzero error velocity) and lever arms 2 cm off the truth: the vectorised
     solve against scipy's hybrid root finder (finite-difference Jacobian, from zero) on the
