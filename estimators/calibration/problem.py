@@ -60,7 +60,7 @@ DEEP_TIMING_FRACTION = 0.01  # deep model when the round trip exceeds 1% of the 
 ASSEMBLED_MIN_NODES = 400_000  # expanded-graph size above which the Jacobian is assembled per row
 # the symbolic Jacobian costs about its expanded nodes times its forward directions (the colours of its pattern: a
 # motion model's parameters reach every row): above this product it is assembled (and compiled) too. Measured with
-# 24 starts (2026-12-02; `estimators.calibration.problem.symbolic_jacobian_cost`): a 62-s window of winriver02
+# 24 starts unless said (2026-12-02; `estimators.calibration.problem.symbolic_jacobian_cost`): a 62-s window of winriver02
 # (123 pings, the motion model in deep water: 343k nodes x 47 colours, 16e6; its symbolic Jacobian 69 ms an
 # evaluation against 3 ms assembled, 4 starts 157 s -> 24 s), the next window (219 pings, 7e6) 14.6 -> 1.8 s,
 # RiverPro_test01 (3.6e6) 6.6, 5.2 -> 3.4, 3.1 s (4.8 s with an empty cache), the simulated river_survey (2.7e6)
@@ -148,8 +148,6 @@ def _beyond_sensor_noise(fit: AttitudeFit) -> np.ndarray:
     return np.asarray(fit.sigmas) > np.asarray(MAX_MODEL_RESIDUAL_RAD)
 
 
-
-
 LONE_BEST_MIN_STARTS = 4  # from this many starts, a best that only one of them reached is said to be unconfirmed
 
 
@@ -161,7 +159,7 @@ def lone_best(ms: MultistartResult) -> str | None:
     if n < LONE_BEST_MIN_STARTS or ms.n_groups < 2 or round(ms.fraction_at_best * n) != 1:
         return None
     return (f"multistart: only 1 of {n} starts reached the best objective, the others ended at {ms.n_groups - 1} "
-            "other local solution(s): a better one may lie where no start went; rerun with more starts (--starts), "
+            "other local solution(s): a better one may lie where no start went; rerun with more starts (--starts) or "
             "another seed (--seed)")
 
 
@@ -411,7 +409,7 @@ class CalibrationProblem:
             result.warnings.append(unsettled)
         lone = lone_best(ms)
         if lone:
-            result.warnings.append(lone + (" or the beams' attitude from the sensor's samples (--attitude samples)"
+            result.warnings.append(lone + ("; or take the beams' attitude from the sensor's samples (--attitude samples)"
                                            if self.attitude_source == "model" else ""))
         return result
 
