@@ -67,6 +67,20 @@ def test_head_sensor_reports_head_frame_and_no_installation_angles(diag_result, 
     assert len(out["starts"]) == 6 and {"objective", "iterations", "time_s", "status", "group"} <= set(out["starts"][0])
 
 
+def test_four_lever_arms_at_one_point_print_as_one_row(diag_result, capsys):
+    # a TRDI file gives no transducer radius: the importer's 0 puts the four transducers at P
+    from adcpdyn.cli.verbs.calibration import _print_calibration
+
+    _print_calibration(diag_result, "pool_diag")
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("  r")]
+    assert [line.split(":")[0] for line in rows] == ["  r1", "  r2", "  r3", "  r4"]
+    one = dataclasses.replace(diag_result, lever_arms_sensor_m=np.repeat(diag_result.lever_arms_sensor_m[:1], 4, axis=0))
+    _print_calibration(one, "pool_diag")
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("  r")]
+    assert len(rows) == 1 and rows[0].startswith("  r1-r4: ") and "the four transducers at one point" in out
+
+
 def test_tangential_velocity_predicted_along_true_motion(diag_case, diag_result):
     err = calibration_errors(diag_case, diag_result)
     assert err["tangential_radial_rms_m_s"] < 0.003 < err["tangential_radial_signal_rms_m_s"]

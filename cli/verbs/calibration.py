@@ -55,14 +55,17 @@ def _print_calibration(result, title: str) -> None:
     if result.instrument is not None:
         say(f"instrument: {result.instrument.label()}")
     label = "head-frame lever arms (m)" if result.attitude_frame == "transducer" else "radius vectors, body frame (m)"
-    if not np.isfinite(result.lever_arms_sensor_se_m).any():
+    arms, arms_se = np.asarray(result.lever_arms_sensor_m), np.asarray(result.lever_arms_sensor_se_m)
+    one_point = bool(np.all(arms == arms[0]))  # a transducer radius of 0 (not in the file) puts all four at P
+    if not np.isfinite(arms_se).any():
         say(f"{label}: not determined (the warnings say why)")
     else:
-        say(label + "  [value +- se]")
-    for i in range(4 if np.isfinite(result.lever_arms_sensor_se_m).any() else 0):
+        say(label + "  [value +- se]" + ("; the four transducers at one point (the case's transducer radius is 0)"
+                                         if one_point else ""))
+    for i in range(0 if not np.isfinite(arms_se).any() else 1 if one_point else 4):
         cells = "  ".join(f"{v:+.4f} +- {s:.4f}" if np.isfinite(s) else "  (not determined)  "
-                          for v, s in zip(result.lever_arms_sensor_m[i], result.lever_arms_sensor_se_m[i]))
-        say(f"  r{i + 1}: {cells}")
+                          for v, s in zip(arms[i], arms_se[i]))
+        say(f"  {'r1-r4' if one_point else f'r{i + 1}'}: {cells}")
     if_moves = {c["pair"][0]: c for c in result.confounded if "se_if_bed_moves_rad" in c}
 
     def bed_fixed(name: str) -> str:  # the bed tested and dropped: the pair's other reading, in the headline
