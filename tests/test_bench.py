@@ -98,13 +98,19 @@ def test_navigation_window_check_is_the_weighted_spread_about_the_mean(capsys, m
 
     est = {1: (1.0, 0.5), 2: (2.0, 0.5), 3: (4.0, 1.0)}  # window -> (deg, SE deg)
     calls = iter(est.values())
+    # the defaults: the third window keeps a bed, the second is not determined (out of the spread)
+    defaults = iter([(1.0, 0.5, None), (9.0, np.inf, None), (2.0, 0.5, [0.01, 0.01])])
+    plain = []
 
     def fake(cases, navigation, starts, **options):
         if options:  # a window: compass deviation and bed left out
             assert options == {"compass_deviation": "off", "moving_bed": "off"}
-        m, s = next(calls) if options else (0.0, 1.0)
+            m, s, bed = *next(calls), None
+        else:  # the file itself first, then the windows with the defaults
+            plain.append(1)
+            m, s, bed = (0.0, 1.0, None) if len(plain) == 1 else next(defaults)
         r = SimpleNamespace(heading_misalignment_rad=np.radians(m), heading_misalignment_se_rad=np.radians(s),
-                            moving_bed_velocity_se_m_s=None, noise_sigma={"bt": 0.01}, multistart=SimpleNamespace(status="ok"))
+                            moving_bed_velocity_se_m_s=bed, noise_sigma={"bt": 0.01}, multistart=SimpleNamespace(status="ok"))
         return r, 0.1
 
     monkeypatch.setattr(nav, "_calibrate", fake)
@@ -117,8 +123,12 @@ def test_navigation_window_check_is_the_weighted_spread_about_the_mean(capsys, m
     w = np.array([4.0, 4.0, 1.0])
     m = np.array([1.0, 2.0, 4.0])
     mean = np.sum(w * m) / np.sum(w)
-    [window] = res["windows"]
+    window, default = res["windows"]
     assert window["chi2_per_dof"] == pytest.approx(np.sum(w * (m - mean) ** 2) / 2, rel=1e-9)
+    assert default["options"] == nav.DEFAULTS and default["chi2_per_dof"] == pytest.approx(4.0 * 0.5, rel=1e-9)
     nav.print_navigation(res)
-    assert [t["met"] for t in res["targets"]] == [window["chi2_per_dof"] <= nav.COVERED_CHI2]
-    assert "| RiverPro_test01.PD0 | knots | +1.00 +- 0.50, +2.00 +- 0.50, +4.00 +- 1.00 |" in capsys.readouterr().out
+    assert [t["met"] for t in res["targets"]] == [window["chi2_per_dof"] <= nav.COVERED_CHI2,
+                                                  default["chi2_per_dof"] <= nav.COVERED_CHI2]
+    out = capsys.readouterr().out
+    assert "| RiverPro_test01.PD0 | knots | bed and deviation off | +1.00 +- 0.50, +2.00 +- 0.50, +4.00 +- 1.00 |" in out
+    assert "| defaults | +1.00 +- 0.50, +9.00 +- inf, +2.00 +- 0.50 (bed kept) | 2.00 |" in out
