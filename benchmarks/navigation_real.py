@@ -113,8 +113,8 @@ def markdown_table(res: dict) -> str:
               "|---|---|---|---|---:|"]
     for w in res["windows"]:
         est = ", ".join(f"{a:+.2f} +- {b:.2f}" + (" (bed kept)" if bed else "")
-                        for a, b, bed in zip(w["misalignment_deg"], w["se_deg"], w.get("bed", [False] * len(w["se_deg"]))))
-        lines.append(f"| {w['file']} | {w['navigation']} | {w.get('options', OFF)} | {est} | {w['chi2_per_dof']:.2f} |")
+                        for a, b, bed in zip(w["misalignment_deg"], w["se_deg"], w["bed"]))
+        lines.append(f"| {w['file']} | {w['navigation']} | {w['options']} | {est} | {w['chi2_per_dof']:.2f} |")
     return "\n".join(lines)
 
 
@@ -122,7 +122,7 @@ def print_navigation(res: dict) -> None:
     print("\n" + markdown_table(res))
     for m in res["missing"]:
         print(f"missing: {m}")
-    print_targets(res, [Target(f"{w['file']} {w['navigation']}{', defaults' if w.get('options') == DEFAULTS else ''}: the "
+    print_targets(res, [Target(f"{w['file']} {w['navigation']}{', defaults' if w['options'] == DEFAULTS else ''}: the "
                                f"windows' spread covered by their SEs (chi2/dof <= {COVERED_CHI2})", w["chi2_per_dof"],
                                w["chi2_per_dof"] <= COVERED_CHI2)
                         for w in res["windows"]])

@@ -81,14 +81,15 @@ BEGIN, END = "<!-- status-table: python -m adcpdyn.benchmarks.status -->\n", "<!
 
 
 def write(page: Path, folder: Path = RESULTS) -> None:
-    """Replace the table between ``page``'s markers (written atomically: a temporary file renamed)."""
+    """Replace the table between ``page``'s markers (written atomically, :func:`~adcpdyn.cases.atomic.atomic_path`)."""
+    from ..cases.atomic import atomic_path
+
     text = page.read_text()
     if BEGIN not in text or END not in text:
         raise SystemExit(f"{page}: expected the markers {BEGIN.strip()!r} and {END!r}")
     i, j = text.index(BEGIN) + len(BEGIN), text.index(END)
-    tmp = page.with_name(page.name + ".tmp")
-    tmp.write_text(text[:i] + markdown_table(folder) + "\n" + text[j:])
-    tmp.replace(page)
+    with atomic_path(page, suffix=page.suffix) as tmp:
+        tmp.write_text(text[:i] + markdown_table(folder) + "\n" + text[j:])
 
 
 if __name__ == "__main__":

@@ -445,7 +445,6 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
     assert np.max(np.abs(a.x - s.x)[np.isfinite(se)] / se[np.isfinite(se)]) < 1e-2
 
 
-
 def test_a_small_graph_whose_symbolic_jacobian_is_costly_is_assembled():
     """`--jacobian auto` assembles a graph under ASSEMBLED_MIN_NODES whose symbolic Jacobian is costly
     (a motion model in deep water reaches every row: nodes x forward directions), and the cost estimate
@@ -463,6 +462,8 @@ def test_a_small_graph_whose_symbolic_jacobian_is_costly_is_assembled():
         assert (cost > ASSEMBLED_MIN_COST) == costly and auto.assembled == costly and not auto.model.compiled
     symbolic = CalibrationProblem(case, CalibrationConfig(n_starts=2, jacobian="symbolic"))
     assert 0.25 < symbolic.jacobian_fun.n_instructions() / symbolic_jacobian_cost(symbolic.model) < 1.0
+
+
 def test_static_correction_with_undetermined_installation_uses_the_nominal_angles_and_says_so():
     from adcpdyn.estimators.asc import asc
     from adcpdyn.estimators.calibration.record import as_record
