@@ -22,7 +22,7 @@ test: $(STAMP)
 
 # the tests marked slow (not in `make test`, which stays under 3 minutes; .ci/run runs them as its second
 # step): the fuzz harness's case files through every verb and diagnose on every valid variant, the real
-# transect's reference latency, the field self-tests and the other calls of 6 s and more
+# transect's reference latency, the field self-tests and the other calls of 5 s and more (on the slower hosts)
 test-slow: $(STAMP)
 	$(PY) -m pytest -n auto --dist worksteal -m slow
 

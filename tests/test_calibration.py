@@ -632,6 +632,7 @@ def test_a_bed_fitted_against_the_flow_is_not_a_moving_bed():
     assert moving_bed_test(towards(160.0, 0.01), se, False, flow)["decision"] == "fixed"
 
 
+@pytest.mark.slow  # 9.0 s
 def test_the_flow_direction_is_the_water_profiles_in_the_true_earth_frame():
     """mean_flow on deep_ocean (a vessel-frame sensor turned 45 deg on its ship): the direction of the
     mean water velocity is the simulated current's once the installation yaw turns the beams; a

@@ -96,7 +96,8 @@ def test_foreign_rotation_free_case_asc_recovers_reference(tmp_path, capsys):
     assert np.max(np.abs(corr["vessel_velocity_m_s"] - ref)) < 1e-6  # float32 radials in the file
 
 
-@pytest.mark.parametrize("scenario", ["pool_m0", "deep_ship", "deep_ocean"])
+@pytest.mark.parametrize("scenario", ["pool_m0", "deep_ship",
+                                      pytest.param("deep_ocean", marks=pytest.mark.slow)])  # 7.5 s
 def test_every_builtin_scenario_simulates_reads_and_corrects(tmp_path, scenario):
     case = tmp_path / f"{scenario}.h5"
     assert main(["simulate", scenario, "--seed", "1", "--out", str(case)]) == 0

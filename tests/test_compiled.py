@@ -84,7 +84,9 @@ def test_compile_always_needs_the_assembled_jacobian():
         CalibrationConfig(compile="always")
 
 
-@pytest.mark.parametrize("scenario, attitude", [("pool_m0", "model"), ("deep_ship", "model"), ("diag_boat", "samples")])
+@pytest.mark.parametrize("scenario, attitude", [("pool_m0", "model"),
+                                               pytest.param("deep_ship", "model", marks=pytest.mark.slow),  # 5.5 s
+                                               ("diag_boat", "samples")])
 def test_compiled_calibration_problem_equals_the_interpreted_one(cache, scenario, attitude):
     """Residuals, assembled Jacobian, J^T J and the NLP's gradient (the solver's reverse sweep through
     the compiled bottom-track, attitude and reference models) of the same problem, compiled and not."""

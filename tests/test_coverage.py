@@ -85,6 +85,7 @@ def test_missing_per_ping_bed_depths_fall_back_on_the_attribute(m1):
     assert any("2 of" in w for w in case_warnings(m1.replace(environment=env)))
 
 
+@pytest.mark.slow  # 5.9 s
 def test_reference_without_vertical_is_valid_for_info_correct_compare_and_diagnose(m1, tmp_path, calib, capsys):
     case = _nan_vertical(shortened(m1, 20.0))
     path = tmp_path / "no_vertical.h5"

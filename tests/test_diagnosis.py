@@ -378,6 +378,7 @@ def test_moving_bed_is_named_on_a_run_known_to_stay_put():
     assert row["expected"] == "moving_bed" and row["verdict"] == "moving_bed"
 
 
+@pytest.mark.slow  # 7.6 s
 def test_surge_is_named_on_a_run_known_to_stay_put_and_left_to_the_base_under_way():
     """A run held still (the pool) has no navigation to follow a surge: the catalog's surge (one
     frequency, along and across the sensor's heading) is a candidate there and removes the gap, even
@@ -571,6 +572,7 @@ def test_a_real_transect_without_gnss_gets_a_base_that_follows_the_boat():
     assert all(not s["significant"] for s in held)
 
 
+@pytest.mark.slow  # 6.4 s
 def test_reference_delay_profile_holds_the_delay_and_reports_its_curvature():
     """On a random-walk base the reference delay is pinned at its profile's best (never left free to
     the joint fit), inside the searched span, with a positive standard error from the profile; the

@@ -57,6 +57,7 @@ def test_malformed_calibration_files_through_every_reader(fuzz):
     assert _ran(counts, "correct adc", "exit 2") > 40 and _ran(counts, "correct rootfinder", "exit 0") >= 4
 
 
+@pytest.mark.slow  # 5.5 s
 @pytest.mark.skipif(not REAL_PD0.exists(), reason=f"real data file {REAL_PD0} absent")
 def test_damaged_instrument_files_are_read_or_refused_in_one_line(fuzz, capfd):
     folder, base = fuzz

@@ -46,7 +46,7 @@ def _sampled_real_case():
     return without_pings(case, np.arange(case.pings.n) >= 80)  # 80 pings: the sensor's samples, differenced fixes
 
 
-@pytest.mark.parametrize("source", ["model", "samples"])
+@pytest.mark.parametrize("source", ["model", pytest.param("samples", marks=pytest.mark.slow)])  # 7.2 s
 def test_recorded_numbers_as_parameters_are_the_constants_they_replace(source):
     """The measurement model with its recorded numbers as parameters (radials, ranges, depths, the
     sensor's segments, the reference's times, segments and velocities) computes, on those numbers, the

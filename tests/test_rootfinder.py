@@ -25,7 +25,8 @@ from adcpdyn.solvers.rootfinder import RootfinderOptions, error_direction, solve
 
 
 
-@pytest.mark.parametrize("scenario, timing", [("pool_m1", "deep"), ("deep_ocean", "deep"),
+@pytest.mark.parametrize("scenario, timing", [("pool_m1", "deep"),
+                                             pytest.param("deep_ocean", "deep", marks=pytest.mark.slow),  # 7.6 s
                                              pytest.param("deep_ocean", "exact", marks=pytest.mark.slow)])  # 6.5 s
 def test_exact_solve_equals_scipy_root_ping_by_ping(scenario, timing):
     """Noisy radials (a nonzero error velocity) and lever arms 2 cm off the truth: the vectorised
@@ -126,6 +127,7 @@ def test_a_ping_without_a_root_is_nan_and_counted():
     assert good["unconverged_pings"] == good["fallback_pings"] == 0 and np.max(good["residual"]) < 1e-9
 
 
+@pytest.mark.slow  # 6.3 s
 def test_pings_beyond_the_expansion_get_the_residual_evaluated_at_their_receive_times(monkeypatch):
     """With the expansion's reach set to zero every ping's residual is evaluated at the result's own
     receive times: the same residuals (to 1e-12 m/s in 300 m of water) and the same solution."""

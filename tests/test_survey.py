@@ -113,6 +113,7 @@ def test_correct_adds_the_run_bed_back_and_says_so(survey, joint, tmp_path):
     assert np.all(np.abs(with_bed) < 0.03)
 
 
+@pytest.mark.slow  # 5.0 s
 def test_joint_problem_is_block_sparse_and_its_assembled_jacobian_is_casadis(survey):
     """Two runs: each run's rows touch only its own attitude and knots; the assembled Jacobian equals
     casadi.jacobian of the whole expanded problem (beams' attitude from the samples, bed, misalignment)."""
