@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from pathlib import Path
 
@@ -93,6 +94,19 @@ def real(name: str) -> Path:
         pytest.skip(f"{path} absent")
     pytest.importorskip("mhkit")
     return path
+
+
+@functools.lru_cache(maxsize=None)
+def _dolfyn_dataset(path: Path):
+    from adcpdyn.cases.importers.reader import read_dolfyn
+
+    return read_dolfyn(path)[0]
+
+
+def dolfyn_dataset(name: str):
+    """dolfyn's dataset of a real file by name, read once per test process; not to be modified
+    (:func:`dolfyn_reference.dolfyn_earth` works on a deep copy)."""
+    return _dolfyn_dataset(real(name))
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
-from conftest import REAL, real
+from conftest import REAL, dolfyn_dataset, real
 
 from adcpdyn.cases.importers import ImportFailure, Window, detect_vendor, import_file, write_imported
 from adcpdyn.cases.importers.rdi_frames import SWAP, beam_to_earth, rdi_matrix, to_beam
@@ -37,11 +37,8 @@ def test_beam_earth_round_trip():
 
 
 # ---------------------------------------------------------------- real files
-def _instrument_bt(path):
-    from adcpdyn.cases.importers.reader import read_dolfyn
-
-    ds, _ = read_dolfyn(path)
-    return np.asarray(ds["vel_bt"].values, dtype=np.float64).T
+def _instrument_bt(name):
+    return np.asarray(dolfyn_dataset(name)["vel_bt"].values, dtype=np.float64).T
 
 
 @needs_reader
@@ -49,7 +46,7 @@ def test_earth_file_asc_matches_instrument_earth_bt(imported):
     case, attrs = imported("RDI_withBT.000")
     assert attrs["/provenance"]["coordinate_system_found"] == "earth"
     v = asc(case).vessel_velocity_m_s  # NED velocity of the transducer
-    enu = _instrument_bt(real("RDI_withBT.000"))[:, :3]  # bottom relative to the ADCP, E N U
+    enu = _instrument_bt("RDI_withBT.000")[:, :3]  # bottom relative to the ADCP, E N U
     ok = np.all(np.isfinite(case.pings.bt_radial_m_s), axis=1) & np.all(np.abs(enu) < 30, axis=1)
     assert ok.sum() > 800
     mine = np.column_stack([-v[ok, 1], -v[ok, 0], v[ok, 2]])
@@ -64,7 +61,7 @@ def test_ship_file_asc_matches_instrument_ship_bt(imported):
     psi = case.attitude.heading_rad
     fwd = np.cos(psi) * v[:, 0] + np.sin(psi) * v[:, 1]
     stbd = -np.sin(psi) * v[:, 0] + np.cos(psi) * v[:, 1]
-    ship = _instrument_bt(real("winriver01.PD0"))[:, :3]  # X starboard, Y bow, Z up, bottom relative to the ADCP
+    ship = _instrument_bt("winriver01.PD0")[:, :3]  # X starboard, Y bow, Z up, bottom relative to the ADCP
     ok = np.all(np.isfinite(case.pings.bt_radial_m_s), axis=1)
     mine = np.column_stack([-stbd[ok], -fwd[ok], v[ok, 2]])
     assert np.max(np.abs(mine - np.round(ship[ok] * 1000) / 1000)) < EARTH_BT_TOL

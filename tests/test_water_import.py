@@ -4,12 +4,11 @@ bottom track, to 1e-6 m/s."""
 
 from __future__ import annotations
 
-import functools
 
 import h5py
 import numpy as np
 import pytest
-from conftest import real
+from conftest import dolfyn_dataset, real
 from dolfyn_reference import dolfyn_earth
 
 from adcpdyn.cases.importers import Window, import_file, write_imported
@@ -24,19 +23,11 @@ FILES = [("RiverPro_test01.PD0", "beam"), ("winriver01.PD0", "ship"), ("winriver
          ("RDI_withBT.000", "earth"), ("vmdas02_os.ENR", "beam")]
 
 
-@functools.lru_cache(maxsize=None)
-def _read(name):
-    """dolfyn's dataset of a real file, read once per test process (dolfyn_earth works on a deep copy)."""
-    from adcpdyn.cases.importers.reader import read_dolfyn
-
-    return read_dolfyn(real(name))[0]
-
-
 def _dolfyn(name, case, float64=True):
     """dolfyn's Earth (E, N, U) water (N, K, 3) and bottom-track (N, 3) velocities at the case's pings."""
     from adcpdyn.cases.importers.window import select
 
-    ds = _read(name)
+    ds = dolfyn_dataset(name)
     keep, _ = select(ds["time"].values.astype("datetime64[ns]").astype(np.int64) / 1e9, Window(), name)
     vel, vel_bt = dolfyn_earth(ds, float64=float64)
     K = case.water.cell_depth_m.size
@@ -100,7 +91,7 @@ def test_three_beam_cells_and_screening_are_recorded(imported):
 
 def test_cell_depths_follow_the_instrument_geometry(imported):
     case, attrs = imported("winriver01.PD0")
-    ds = _read("winriver01.PD0")
+    ds = dolfyn_dataset("winriver01.PD0")
     cells = case.water.cell_depth_m
     rng = np.asarray(ds["range"].values, dtype=float)
     assert np.allclose(cells, case.environment.transducer_depth_m + rng[:cells.size], atol=1e-12)
