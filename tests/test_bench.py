@@ -89,6 +89,7 @@ def test_survey_day_targets_follow_the_rows(capsys):
     assert "worker exited with status 1: boom" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # 2.8-4.6 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_navigation_window_check_is_the_weighted_spread_about_the_mean(capsys, monkeypatch):
     """bench navigation's window check: chi2/dof of estimates about their inverse-variance mean,
     against a hand computation; its target follows the number; a missing real file is listed."""

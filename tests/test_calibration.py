@@ -445,6 +445,7 @@ def test_assembled_and_symbolic_jacobians_reach_the_same_calibration():
     assert np.max(np.abs(a.x - s.x)[np.isfinite(se)] / se[np.isfinite(se)]) < 1e-2
 
 
+@pytest.mark.slow  # 3.3-5.0 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_a_small_graph_whose_symbolic_jacobian_is_costly_is_assembled():
     """`--jacobian auto` assembles a graph under ASSEMBLED_MIN_NODES whose symbolic Jacobian is costly
     (a motion model in deep water reaches every row: nodes x forward directions), and the cost estimate

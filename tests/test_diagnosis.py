@@ -130,6 +130,7 @@ def test_diagnosis_names_the_injected_effect_and_its_value(latency_diagnosis):
     assert abs(top["shrink_fraction"] - oracle) <= 0.2 * abs(oracle)
 
 
+@pytest.mark.slow  # 4.8-5.2 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_compass_offset_beside_an_estimated_installation_is_named():
     """A heading error turns the beams as an installation yaw does, but also the transducers'
     tangential velocities, which the installation does not: beside an estimated installation it is
@@ -141,6 +142,7 @@ def test_compass_offset_beside_an_estimated_installation_is_named():
     assert r.verdict == "compass_offset"
 
 
+@pytest.mark.slow  # 4.1-7.2 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_a_compass_error_of_any_angle_is_named_with_its_size():
     """A wrongly entered heading alignment or declination puts the heading tens of degrees off (a
     transect of MHKiT's Tanana data reads 45 deg off its GNSS course): the offset's bounds are the
@@ -296,6 +298,7 @@ def test_cli_diagnose_writes_the_report(tmp_path, latency_diagnosis):
     assert main(["diagnose", str(path), "--out", str(path)]) == 2  # never overwrites the input
 
 
+@pytest.mark.slow  # 3.5-4.6 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_effect_outside_the_tried_catalog_is_reported_as_a_remaining_gap():
     """Heave injected, heave not tried: no false verdict, the gap is significant and localised."""
     params = {"omega_rad_s": 1.3, "cos_m": 0.1, "sin_m": -0.08}
@@ -456,6 +459,7 @@ def test_a_nearly_as_good_effect_is_named_beside_the_chosen_one(monkeypatch):
     assert "attitude_latency explains nearly as much as tilt_lowpass" in loose.statement
 
 
+@pytest.mark.slow  # 3.3-4.7 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_candidates_refitted_in_threads_give_the_same_report():
     """A round's candidates are refitted in threads; the report does not depend on it."""
     case = simulate(with_effect(get_scenario("pool_diag"), "heave", {"omega_rad_s": 1.3, "cos_m": 0.08, "sin_m": -0.05}), seed=4)

@@ -178,6 +178,7 @@ def test_fixed_and_drawn_effects():
     assert len({d["compass_deviation"]["A_rad"] for d in drawn}) == 5  # the survey seed draws them
 
 
+@pytest.mark.slow  # 6.2-7.8 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_compass_deviation_is_a_function_of_the_slow_heading_not_of_the_readings_noise():
     """The samples' deviation argument (p[7]) is their heading smoothed over a minute: white reading
     noise on a steady course is cut to a quarter, a one-minute turn followed within a degree; and a four-transect survey

@@ -60,6 +60,7 @@ def test_signal_limit_sits_on_the_bar(fitted):
 
 
 
+@pytest.mark.slow  # 5.2-7.9 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_own_delay_profile_peaks_at_the_injected_latency():
     """The clean file's own attitude-delay profile (each model exact at its delay: the samples taken
     about t + d) peaks at zero on a clean simulated run, so no own delay is claimed there, and at s

@@ -147,6 +147,7 @@ def _sound_speed_rows(result) -> list:
     return [r for r in result.ranking if r["effect"] == "sound_speed_error"]
 
 
+@pytest.mark.slow  # 4.4-5.3 s in two runs of make test on 2026-12-03's host: `make test-slow`, CI's second step
 def test_a_sound_speed_error_is_read_by_the_marginal_likelihood(boat):
     """A run whose depth its ranges give (the ranges then tell nothing of the sound speed), recorded
     with a sound speed 3 % high, diagnosed on the random-walk base: the sound speed's estimate is the
