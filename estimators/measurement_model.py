@@ -153,7 +153,7 @@ class SurveyModel:
             raise ValueError("runs: expected at least one run")
         self.runs, self.spec = runs, spec
         # the recorded numbers as parameters of the graph (``data_sym``, ``data_values``), not constants: one
-        # graph, its Jacobian and solver then serve every run of the same shape (:mod:`.diagnosis.model_cache`)
+        # graph, its Jacobian and solver then serve every run of the same shape (:mod:`.model_cache`)
         self.data_parameters = data_parameters
         self._data: dict = {}  # name -> (its parameter symbol, its values, column-major)
         # the per-ping models as machine code when the problem's pings (all runs') reach compile_min_pings

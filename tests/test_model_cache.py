@@ -13,7 +13,7 @@ from conftest import real, without_pings
 
 from adcpdyn.cases.scenario import get_scenario
 from adcpdyn.cases.simulation import simulate
-from adcpdyn.estimators.diagnosis import model_cache
+from adcpdyn.estimators import model_cache
 from adcpdyn.estimators.diagnosis.base import base_from
 from adcpdyn.estimators.diagnosis.config import DiagnosisConfig
 from adcpdyn.estimators.diagnosis.field_errors import inject

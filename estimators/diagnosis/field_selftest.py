@@ -18,7 +18,7 @@ from .config import DiagnosisConfig, holding
 from .diagnose import calibration_own_effects, diagnose
 from ..run_setup import has_moving_reference
 from .field_errors import FIELD_ERRORS, detection_limit, estimate_z, inject_survey, injected_values, needs_reference
-from . import model_cache
+from .. import model_cache
 from .own_effects import find_own_effects
 from .signal_limit import own_delay_profile, signal_limit
 

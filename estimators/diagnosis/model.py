@@ -13,7 +13,7 @@ unknowns through the hooks of :class:`adcpdyn.models.effects.base.Effect`, on th
 or on the sensor's samples. Residuals are kept unweighted per channel; the objective weights
 them by noise levels per (run, channel group) passed as parameters, so noise can be
 re-estimated without rebuilding; the recorded numbers and the unknowns' scales are parameters too, so
-another run of the same shape takes the graph built before (:mod:`.model_cache`).
+another run of the same shape takes the graph built before (:mod:`..model_cache`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from ..attitude_fit import periodogram_peak
 from ..knots import hat_basis
 from ..measurement_model import VELOCITY_NAME, EffectTerm, ModelSpec, SurveyModel, channel_slices
 from ..statistics.normal_equations import as_sparse, log_det_normal
-from . import model_cache
+from .. import model_cache
 
 # The per-ping models as machine code from the per-machine cache (:mod:`...solvers.compiled`) at any
 # size: a diagnosis refits tens of NLPs, so even a 261-ping file gains (winriver01, random-walk base:
@@ -208,7 +208,7 @@ class GapModel:
         self._nav = [None if V is None else ca.Function("nav", [x], [V]) for V in model.knot_syms]
 
     def _take_or_assemble(self, new_symbols: bool) -> None:
-        """The graph built before on another run of this shape (:mod:`.model_cache`), else built here (over
+        """The graph built before on another run of this shape (:mod:`..model_cache`), else built here (over
         new symbols, or this model's own at another reference shift) and kept."""
         kept = model_cache.find(self.shape_key, self)
         if kept is not None:
@@ -224,8 +224,45 @@ class GapModel:
         self._assemble()
         model_cache.keep(self.shape_key, self)
 
+    # what another model of this graph takes (:mod:`..model_cache`): symbols, graph, Functions and the solver
+    # whose derivatives a new solver shares; never the runs or their numbers
+    GRAPH_PARTS = ("_z", "_x_of_z", "_p", "_w", "_d", "_groups", "residual_fun", "jacobian_fun", "raw_fun",
+                   "constraint_fun", "weighted_fun", "nlp", "solver")
+
+    def graph_parts(self) -> dict:
+        return {name: getattr(self, name) for name in self.GRAPH_PARTS}
+
+    def graph_signature(self) -> tuple:
+        return self.scale.size, self.data.size, self.constant.tobytes()
+
+    def probe_points(self) -> list:
+        """This model's residuals and constraints from its own symbolic graph (not differentiated: cheap) at
+        random unknowns (within the bounds, pins at theirs) on its recorded numbers: per point (z, the NLP's
+        parameters with unit weights, residuals, constraints)."""
+        sm = self.model
+        fresh = ca.Function("check", [sm.x, sm.data_sym], [sm.raw, sm.g])
+        rng = np.random.default_rng(20261201)
+        lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
+        points = []
+        for _ in range(model_cache.CHECK_POINTS):
+            z = np.clip(rng.uniform(-1.0, 1.0, self.scale.size), lbz, ubz)
+            x = np.where(self.constant, self.lbx, z * self.scale)
+            raw, g = (np.asarray(v, dtype=float).ravel() for v in fresh(x, self.data))
+            points.append((z, self.parameters_at(np.ones(raw.size)), raw, g))
+        return points
+
+    def same_graph(self, parts: dict, points: list) -> bool:
+        """Whether a kept graph's ``parts`` compute this model's residuals and constraints at its
+        :meth:`probe_points`."""
+        for z, p, raw, g in points:
+            if np.mean(np.isfinite(raw)) < 0.9:
+                return False
+            if not (model_cache.agree(raw, parts["raw_fun"](z, p)) and model_cache.agree(g, parts["constraint_fun"](z))):
+                return False
+        return True
+
     def _take_built(self, kept: "model_cache.Built") -> None:
-        """The symbols, graph and Jacobian of a model of the same graph (:mod:`.model_cache`), and a solver of
+        """The symbols, graph and Jacobian of a model of the same graph (:mod:`..model_cache`), and a solver of
         its own that shares that model's derivatives (one solver is never called from two threads at once)."""
         for name, value in kept.parts.items():
             if name != "solver":
