@@ -96,7 +96,7 @@ def measure(problem, options: SolverOptions, starts: int, seed: int) -> dict:
     setup = time.perf_counter() - tic
     lbz, ubz = problem.lbx / problem.scale, problem.ubx / problem.scale
     tic = time.perf_counter()
-    ms = multistart(solver, problem.start_points(starts, seed), lbz, ubz, problem.lbg, problem.ubg, problem.weights(),
+    ms = multistart(solver, problem.start_points(starts, seed), lbz, ubz, problem.lbg, problem.ubg, problem.parameters(),
                     workers=1, progress=False)
     solve = time.perf_counter() - tic
     x = ms.x * problem.scale

@@ -407,10 +407,11 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
         assert problems["symbolic"].head_yaw and problems["symbolic"].sampled == (attitude == "samples")
         assert problems["assembled"].walk == (navigation == "random_walk") and problems["assembled"].assembled
     z = problems["symbolic"].start_points(2, 1)[1]
-    w = problems["symbolic"].weights()
+    w = problems["assembled"].parameters()  # the weights; the symbolic problem's p holds its recorded numbers too
+    assert np.array_equal(problems["symbolic"].parameters()[:w.size], w)
     assembled = problems["assembled"].jacobian_fun(z, w)
-    symbolic = np.asarray(problems["symbolic"].jacobian_fun(z, w))
-    residuals = [np.asarray(problems[j].residual_fun(z, w)[0]).ravel() for j in ("assembled", "symbolic")]
+    symbolic = np.asarray(problems["symbolic"].jacobian_fun(z, problems["symbolic"].parameters()))
+    residuals = [np.asarray(problems[j].residual_fun(z, problems[j].parameters())[0]).ravel() for j in ("assembled", "symbolic")]
     assert np.max(np.abs(residuals[0] - residuals[1])) < 1e-12 * np.max(np.abs(residuals[1]))
     assert np.max(np.abs(assembled.toarray() - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
     gram = symbolic.T @ symbolic  # the Gauss-Newton Hessian's J^T J, formed block by block without J

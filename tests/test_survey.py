@@ -121,9 +121,9 @@ def test_joint_problem_is_block_sparse_and_its_assembled_jacobian_is_casadis(sur
                 for j, a in (("assembled", "samples"), ("symbolic", "samples"))}
     p = problems["symbolic"]
     z = p.start_points(2, 1)[1]
-    w = p.weights()
+    w = problems["assembled"].parameters()  # the weights; the symbolic problem's p holds its recorded numbers too
     assembled = problems["assembled"].jacobian_fun(z, w)
-    symbolic = np.asarray(p.jacobian_fun(z, w))
+    symbolic = np.asarray(p.jacobian_fun(z, p.parameters()))
     assert np.max(np.abs(assembled.toarray() - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
     gram = symbolic.T @ symbolic
     assert np.max(np.abs(problems["assembled"].jacobian_fun.gram(z, w) - gram)) < 1e-9 * np.max(np.abs(gram))

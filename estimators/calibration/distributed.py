@@ -27,7 +27,7 @@ def _solve_share(token: str, build, cases, fits, config, x0s: np.ndarray, indice
         _BUILT.clear()
         problem = _BUILT[token] = build(cases, config, fit=fits)
     lbz, ubz = problem.lbx / problem.scale, problem.ubx / problem.scale
-    return run_starts(problem.solver, x0s, lbz, ubz, problem.lbg, problem.ubg, problem.weights(), progress=False,
+    return run_starts(problem.solver, x0s, lbz, ubz, problem.lbg, problem.ubg, problem.parameters(), progress=False,
                       indices=indices)
 
 

@@ -40,6 +40,7 @@ from ...solvers.multistart import MultistartResult, build_solver, expand_problem
 from ..attitude_fit import AttitudeFit, autocorrelation, fit_attitude
 from ..statistics.hac import at_least_white, ping_bins, sandwich
 from ..knots import knot_times, ping_knots
+from .. import model_cache
 from ..measurement_model import ANGLE_NAMES, ModelSpec, SurveyModel, default_threads
 from ..run_setup import RunSetup, choose_navigation, course_offset_rad, heading_span
 from ..statistics.normal_equations import (SCORING_MAX_UNKNOWNS, VCE_RTOL, group_levels, largest_move, redundancy,
@@ -232,48 +233,127 @@ class CalibrationProblem:
                          bed_knots=config.moving_bed_section_knots)
         compile_min = {"always": 0, "never": None}.get(config.compile, COMPILE_MIN_PINGS)
         symbolic = config.jacobian == "symbolic"  # compiled models are not expanded to SX
-        self.model = model = SurveyModel(runs, spec, compile_min_pings=None if symbolic else compile_min)
+        # the recorded numbers are parameters of the graph: a symbolic problem of a shape built before is taken
+        # from the kept graphs (:mod:`..model_cache`); an assembled one has them as constants
+        self.model = model = SurveyModel(runs, spec, compile_min_pings=None if symbolic else compile_min,
+                                         data_parameters=True)
         costly = config.jacobian == "auto" and not model.compiled and (
             model.assembled_nodes > ASSEMBLED_MIN_NODES or symbolic_jacobian_cost(model) > ASSEMBLED_MIN_COST)
         if config.compile == "auto" and costly:  # assembled anyway: its per-row Jacobians compiled
-            self.model = model = SurveyModel(runs, spec, compile_min_pings=0)
+            self.model = model = SurveyModel(runs, spec, compile_min_pings=0, data_parameters=True)
         u = model.unknowns
         self.names, self.scale, self.lbx, self.ubx = list(u.names), u.scale, u.lower, u.upper
+        self.data = model.data_values
         # single-run views (tests, benchmarks, the CLI print)
         self.case, self.fit, self.timing, self.knots = self.cases[0], self.fits[0], runs[0].timing, runs[0].knots
         self.sampled = runs[0].attitude_source == "samples"
         self.attitude_source = "samples" if self.sampled else "model"
-
-        x = model.x
-        z = ca.MX.sym("z", x.shape[0])
-        raw = model.raw
         # compiled models are evaluated by the assembled Jacobian (jacobian 'symbolic' compiles nothing)
         self.assembled = config.jacobian == "assembled" or model.compiled or costly
         self.threads = default_threads(config.workers, config.n_starts) if self.assembled else 1
         self.solver_options = dataclasses.replace(config.solver, expand=False) if self.assembled else config.solver
-        weights = ca.MX.sym("w", raw.shape[0])
-        subs = [x], [self.scale * z]
-        e_z, raw_z, g_z, r_z, st_z = ca.substitute([weights * raw, raw, model.g, model.r, model.ypr_st], *subs)
-        mx_nlp = {"x": z, "p": weights, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
-        if self.assembled:
-            self.jacobian_fun = model.row_jacobian(z, subs, self.threads)
-        if self.solver_options.expand:
-            self.nlp, e_z, ex = expand_problem(mx_nlp, e_z, {"raw": raw_z, "r": ca.vec(r_z.T), "st": st_z})
-            z, weights, g_z = self.nlp["x"], self.nlp["p"], self.nlp["g"]
-            raw_z, r_vec, st_z = ex["raw"], ex["r"], ex["st"]
-        else:
-            self.nlp, r_vec = mx_nlp, ca.vec(r_z.T)
-        if not self.assembled:
-            self.jacobian_fun = ca.Function("residual_jacobian", [z, weights], [ca.jacobian(e_z, z)])
-        self.residual_fun = ca.Function("residuals", [z, weights], [e_z, raw_z])
-        self.derived_fun = ca.Function("derived", [z], [r_vec, st_z, ca.jacobian(r_vec, z),
-                                                      ca.jacobian(st_z, z), g_z, ca.jacobian(g_z, z)])
         self.lbg, self.ubg = model.lbg, model.ubg
         self.sigma = model.initial_sigmas()
+        self.graph = "assembled"
+        if self.assembled:
+            self._assemble()
+            return
+        self.shape_key = ("calibration", tuple(self.names), tuple((c.run, c.name, c.size) for c in model.channels),
+                          model.data_layout, repr(dataclasses.replace(spec, yaw_centre_rad=0.0, lever_box_m=0.0)),
+                          repr(self.solver_options))
+        kept = model_cache.find(self.shape_key, self)
+        if kept is not None:
+            self._take_built(kept)
+        else:
+            self._build_symbolic()
+            model_cache.keep(self.shape_key, self)
+
+    # ------------------------------------------------------------------ the NLP
+    def _assemble(self) -> None:
+        """The NLP with the recorded numbers and scales as constants, its Jacobian assembled per row
+        (:mod:`..row_jacobian`): p is the weights."""
+        model = self.model
+        z = ca.MX.sym("z", model.x.shape[0])
+        weights = ca.MX.sym("w", model.raw.shape[0])
+        subs = [model.x, model.data_sym], [self.scale * z, ca.DM(self.data)]
+        e_z, raw_z, g_z, r_z, st_z = ca.substitute([weights * model.raw, model.raw, model.g, model.r, model.ypr_st], *subs)
+        self.nlp = {"x": z, "p": weights, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
+        self.jacobian_fun = model.row_jacobian(z, subs, self.threads)
+        self._functions(z, weights, e_z, raw_z, ca.vec(r_z.T), st_z, g_z, None)
+
+    def _build_symbolic(self) -> None:
+        """The NLP over z with p = [weights; recorded numbers; scales] (:meth:`parameters`), expanded to SX
+        where the options say, and its symbolic residual Jacobian: one graph for every problem of its shape."""
+        model = self.model
+        n_rows, n_data, n = model.raw.shape[0], self.data.size, len(self.names)
+        z, p = ca.MX.sym("z", n), ca.MX.sym("p", n_rows + n_data + n)
+        weights, data, scale = p[:n_rows], p[n_rows:n_rows + n_data], p[n_rows + n_data:]
+        subs = [model.x, model.data_sym], [scale * z, data]
+        e_z, raw_z, g_z, r_z, st_z = ca.substitute([weights * model.raw, model.raw, model.g, model.r, model.ypr_st], *subs)
+        self.nlp, r_vec = {"x": z, "p": p, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}, ca.vec(r_z.T)
+        if self.solver_options.expand:
+            self.nlp, e_z, ex = expand_problem(self.nlp, e_z, {"raw": raw_z, "r": r_vec, "st": st_z})
+            z, p, g_z = self.nlp["x"], self.nlp["p"], self.nlp["g"]
+            raw_z, r_vec, st_z = ex["raw"], ex["r"], ex["st"]
+        self.jacobian_fun = ca.Function("residual_jacobian", [z, p], [ca.jacobian(e_z, z)])
+        self.graph = "built"
+        self._functions(z, p, e_z, raw_z, r_vec, st_z, g_z, None)
+
+    def _functions(self, z, p, e_z, raw_z, r_vec, st_z, g_z, like) -> None:
+        self.residual_fun = ca.Function("residuals", [z, p], [e_z, raw_z])
+        self.derived_fun = ca.Function("derived", [z, p], [r_vec, st_z, ca.jacobian(r_vec, z), ca.jacobian(st_z, z), g_z,
+                                                           ca.jacobian(g_z, z)])
+        self._build_solver(like)
+
+    def _build_solver(self, like) -> None:
         tic = time.perf_counter()
         self.solver = build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
-                                   residual_fun=self.residual_fun)
+                                   residual_fun=self.residual_fun, like=like)
         self.build_s = time.perf_counter() - tic  # what another worker's solver costs (multistart weighs it)
+
+    # what another problem of this graph takes (:mod:`..model_cache`): its symbols live in the NLP and Functions
+    GRAPH_PARTS = ("nlp", "jacobian_fun", "residual_fun", "derived_fun", "solver")
+
+    def graph_parts(self) -> dict:
+        return {name: getattr(self, name) for name in self.GRAPH_PARTS}
+
+    def graph_signature(self) -> tuple:
+        return len(self.names), self.data.size, int(self.model.raw.shape[0])
+
+    def probe_points(self) -> list:
+        """This problem's residuals, constraints, lever arms and angles from its own (undifferentiated) graph
+        at random unknowns within the bounds, on its recorded numbers: per point (z, p with unit weights,
+        those four)."""
+        m = self.model
+        fresh = ca.Function("check", [m.x, m.data_sym], [m.raw, m.g, ca.vec(m.r.T), m.ypr_st])
+        rng = np.random.default_rng(20261203)
+        lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
+        points = []
+        for _ in range(model_cache.CHECK_POINTS):
+            z = np.clip(rng.uniform(-1.0, 1.0, self.scale.size), lbz, ubz)
+            values = [np.asarray(v, dtype=float).ravel() for v in fresh(z * self.scale, self.data)]
+            points.append((z, self.parameters_at(np.ones(values[0].size)), values))
+        return points
+
+    def same_graph(self, parts: dict, points: list) -> bool:
+        """Whether a kept problem's ``parts`` compute this problem's residuals, constraints, lever arms and
+        angles at its :meth:`probe_points`."""
+        for z, p, (raw, g, r, st) in points:
+            if np.mean(np.isfinite(raw)) < 0.9:
+                return False
+            derived = parts["derived_fun"](z, p)
+            if not (model_cache.agree(raw, parts["residual_fun"](z, p)[1]) and model_cache.agree(r, derived[0])
+                    and model_cache.agree(st, derived[1]) and model_cache.agree(g, derived[4])):
+                return False
+        return True
+
+    def _take_built(self, kept: "model_cache.Built") -> None:
+        """The NLP, Functions and Jacobian of a problem of the same graph, and a solver of its own sharing that
+        problem's derivatives (one solver is never called from two threads at once)."""
+        for name in ("nlp", "jacobian_fun", "residual_fun", "derived_fun"):
+            setattr(self, name, kept.parts[name])
+        self.graph = "kept"
+        self._build_solver(kept.parts["solver"])
 
     def _moving_bed_choice(self, moving: bool) -> str:
         choice = self.config.moving_bed
@@ -286,6 +366,14 @@ class CalibrationProblem:
 
     def weights(self, sigma: dict | None = None) -> np.ndarray:
         return self.model.weights(sigma or self.sigma)
+
+    def parameters(self, sigma: dict | None = None) -> np.ndarray:
+        """The NLP's parameters p at the noise levels ``sigma`` (default: the current ones): the weights,
+        and for a symbolic problem the recorded numbers and the unknowns' scales after them."""
+        return self.parameters_at(self.weights(sigma))
+
+    def parameters_at(self, weights: np.ndarray) -> np.ndarray:
+        return weights if self.assembled else np.concatenate([weights, self.data, self.scale])
 
     def channel_slices(self) -> dict:
         """Slice of each channel in the residuals: keyed by name for one run, by (run, name) for several."""
@@ -391,7 +479,7 @@ class CalibrationProblem:
 
             ms = distributed_multistart(self, x0s)
         else:
-            ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.weights(), workers=cfg.workers,
+            ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.parameters(), workers=cfg.workers,
                             make_solver=make, warm_start=cfg.solver.warm_start, build_s=self.build_s)
         unsettled = None
         if cfg.estimate_noise:
@@ -427,7 +515,7 @@ class CalibrationProblem:
             if moved <= VCE_RTOL and rounds > 1:  # settled: the last refit's levels are the fixed point's
                 return refit, rounds - 1, moved
             self.sigma = new
-            refit = multistart(solver, refit.x[None, :], lbz, ubz, self.lbg, self.ubg, self.weights(), progress=False)
+            refit = multistart(solver, refit.x[None, :], lbz, ubz, self.lbg, self.ubg, self.parameters(), progress=False)
         return refit, most, largest_move(self._noise_levels(refit.x), self.sigma)
 
     def _refit_solver(self):
@@ -447,11 +535,12 @@ class CalibrationProblem:
         linear-Gaussian walk), since a velocity per ping takes up a share of each group that
         differs from group to group; reached by Fisher scoring where the problem has at most
         ``SCORING_MAX_UNKNOWNS`` unknowns (``normal_equations.scored_levels``), whose steps do not crawl."""
-        raw = np.asarray(self.residual_fun(z, self.weights())[1]).ravel()
+        p = self.parameters()
+        raw = np.asarray(self.residual_fun(z, p)[1]).ravel()
         if not self.walk:
             return self.model.reestimate_sigmas(raw, len(z), self.sigma)
         model = self.model
-        J = self.jacobian_fun(z, self.weights())
+        J = self.jacobian_fun(z, p)
         J = J.tocsr() if sp.issparse(J) else J.sparse()
         used = model.mask > 0
         scored = scored_levels(J, raw, model.row_sigma, used, model.sigma_keys, self.sigma)
@@ -463,7 +552,7 @@ class CalibrationProblem:
     # ------------------------------------------------------------------ result
     def _result(self, ms: MultistartResult) -> CalibrationResult:
         model, u, cfg = self.model, self.model.unknowns, self.config
-        w = self.weights()
+        w = self.parameters()
         e = np.asarray(self.residual_fun(ms.x, w)[0]).ravel()
         # an assembled one stays sparse (rows x unknowns), its J^T J from the same pass; a random walk's
         # (a velocity per ping) sparse too; on knots only J's products are needed (the information is
@@ -476,7 +565,7 @@ class CalibrationProblem:
         else:
             J = self.jacobian_fun(ms.x, w)
             J = J.sparse().tocsr() if self.walk else np.asarray(J)
-        r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x))
+        r_flat, st, Jr, Jst, g, Jg = (np.asarray(a) for a in self.derived_fun(ms.x, w))
         eq = (self.lbg == self.ubg) if len(self.lbg) else np.zeros(0, dtype=bool)
         Lst = np.eye(3) if self.head_sensor else np.asarray(euler_matrix(*np.asarray(st).ravel()))
         context = {"beam_dirs_sensor": model.beam_dirs_t @ Lst.T, "frame": self.frame,
