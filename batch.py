@@ -49,7 +49,7 @@ def _calibrate(job: CalibrateJob) -> dict:
     ms = r.multistart
     notes = [w for c in r.provenance.get("cases", []) for w in c.get("warnings", [])]
     return {"success": r.success, "objective": r.objective, "max_constraint_violation": r.max_constraint_violation,
-            "fraction_at_best": ms.fraction_at_best, "iterations": ms.iterations,
+            "fraction_at_best": ms.fraction_at_best, "iterations": ms.iterations, "graph": r.graph,
             "lever_arms_sensor_m": r.lever_arms_sensor_m.tolist(), "installation_ypr_rad": r.installation_ypr_rad.tolist(),
             "warnings": len(r.warnings), "case_warnings": notes}
 

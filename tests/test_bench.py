@@ -133,3 +133,15 @@ def test_navigation_window_check_is_the_weighted_spread_about_the_mean(capsys, m
     out = capsys.readouterr().out
     assert "| RiverPro_test01.PD0 | knots | bed and deviation off | +1.00 +- 0.50, +2.00 +- 0.50, +4.00 +- 1.00 |" in out
     assert "| defaults | +1.00 +- 0.50, +9.00 +- inf, +2.00 +- 0.50 (bed kept) | 2.00 |" in out
+
+
+@pytest.mark.slow  # about 4 s: `make test-slow`, CI's second step
+def test_graph_reuse_rows_say_which_set_ups_took_a_kept_graph(monkeypatch):
+    from adcpdyn.benchmarks import graph_reuse
+    from adcpdyn.estimators import model_cache
+
+    monkeypatch.delenv(model_cache.CACHE_ENV, raising=False)
+    off, on = graph_reuse.measure("pool_m0", repeats=2)
+    assert (off["cache"], on["cache"]) == (False, True)
+    assert off["graph"] == ["built", "built"] and on["graph"] == ["built", "kept"]
+    assert len(set(off["objective"] + on["objective"])) == 1  # the same solves to the last digit

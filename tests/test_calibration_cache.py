@@ -42,7 +42,7 @@ def test_a_case_on_other_numbers_takes_the_kept_graph_and_solves_as_a_fresh_buil
     assert not first.assembled and first.graph == "built" and model_cache.stats()["misses"] == 1
     noisier = _with_radials(case, case.pings.bt_radial_m_s + np.random.default_rng(2).normal(0, 0.01, (case.pings.n, 4)))
     kept, r_kept = _solved(noisier)
-    assert kept.graph == "kept" and model_cache.stats()["hits"] == 1
+    assert kept.graph == "kept" and model_cache.stats()["hits"] == 1 and r_kept.to_dict()["solver"]["graph"] == "kept"
     assert kept.jacobian_fun is first.jacobian_fun and kept.solver is not first.solver  # a solver of its own
     assert not np.array_equal(kept.parameters(), first.parameters())  # the same graph, other numbers
     monkeypatch.setenv(model_cache.CACHE_ENV, "0")

@@ -49,7 +49,8 @@ def _print_calibration(result, title: str) -> None:
     ms = result.multistart
     deg = np.rad2deg
     say(f"{title}: {result.config.method} calibration, formulation {result.formulation}, {result.timing}-water model, "
-        f"{result.jacobian} Jacobian, beams' attitude from the {result.attitude_source}")
+        f"{result.jacobian} Jacobian" + (" (the graph of an earlier problem of this shape)" if result.graph == "kept" else "")
+        + f", beams' attitude from the {result.attitude_source}")
     say(f"solver: {ms.message}; objective {result.objective:.6g}; max constraint violation "
         f"{result.max_constraint_violation:.2e}; solver time {ms.time_s:.2f} s summed over the starts")
     if result.instrument is not None:

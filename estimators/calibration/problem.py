@@ -690,7 +690,7 @@ class CalibrationProblem:
             velocity_knots_s=None if pooled else first.velocity_knots_s,
             velocity_knots_m_s=None if pooled else first.velocity_knots_m_s,
             heading_misalignment_rad=misalignment, heading_misalignment_se_rad=misalignment_se, warnings=warn,
-            jacobian="assembled" if self.assembled else "symbolic",
+            jacobian="assembled" if self.assembled else "symbolic", graph=self.graph,
             attitude_source=", ".join(dict.fromkeys("samples" if r.attitude_source == "samples" else "model" for r in self.runs)),
             attitude_source_reason="; ".join(dict.fromkeys(r.attitude_reason for r in self.runs)),
             moving_bed=self.moving_bed, compass_deviation_rad=deviation, compass_deviation_se_rad=deviation_se,

@@ -137,6 +137,9 @@ class CalibrationResult:
     heading_misalignment_se_rad: float = float("inf")
     warnings: list = field(default_factory=list)
     jacobian: str = "symbolic"  # how the residual Jacobian was formed: symbolic or assembled per row
+    # where the NLP's graph came from: "built" for this problem (and kept), "kept" (taken from a problem of the same
+    # graph on other numbers: :mod:`..model_cache`), "assembled" (the numbers constants of a per-row Jacobian)
+    graph: str = "built"
     attitude_source: str = "model"  # the beams' attitude: the fitted model or the sensor's samples
     attitude_source_reason: str = ""
     moving_bed: str = "off"  # off, constant or section
@@ -220,6 +223,7 @@ class CalibrationResult:
                 "time_s": ms.time_s,
                 "n_groups": ms.n_groups,
                 "jacobian": self.jacobian,
+                "graph": self.graph,
                 "fraction_at_best": ms.fraction_at_best,
                 "best_start": ms.best_start,
                 "options": asdict(self.config.solver),
