@@ -89,10 +89,11 @@ def find(key, model) -> Built | None:
     return None
 
 
-def keep(key, model) -> None:
-    """Keep ``model``'s graph; over :func:`capacity`, drop the least recently used graph that no model has
-    taken yet (else the least recently used): a field self-test's clean-run graphs, taken by every injected
-    run, outlive a run whose error makes graphs of other shapes (a motion model's attitude latency)."""
+def keep(key, model, most: int | None = None) -> None:
+    """Keep ``model``'s graph; over :func:`capacity` (or over ``most`` graphs whose keys begin as this one's:
+    a kind whose graphs are large), drop the least recently used graph that no model has taken yet (else the
+    least recently used): a field self-test's clean-run graphs, taken by every injected run, outlive a run
+    whose error makes graphs of other shapes (a motion model's attitude latency)."""
     n = capacity()
     if n == 0:
         return
@@ -100,12 +101,13 @@ def keep(key, model) -> None:
     with _lock:
         _kept.setdefault(key, []).append(new)
         _kept.move_to_end(key)
-        while sum(len(v) for v in _kept.values()) > n:
-            kept = [(k, b) for k, bs in _kept.items() for b in bs if b is not new]
-            k, b = next(((k, b) for k, b in kept if b.taken == 0), kept[0])
-            _kept[k] = [x for x in _kept[k] if x is not b]
-            if not _kept[k]:
-                del _kept[k]
+        for alike, limit in ((lambda k: k[0] == key[0], most), (lambda k: True, n)):
+            while limit is not None and sum(len(v) for k, v in _kept.items() if alike(k)) > limit:
+                kept = [(k, b) for k, bs in _kept.items() if alike(k) for b in bs if b is not new]
+                k, b = next(((k, b) for k, b in kept if b.taken == 0), kept[0])
+                _kept[k] = [x for x in _kept[k] if x is not b]
+                if not _kept[k]:
+                    del _kept[k]
 
 
 def agree(a, b) -> bool:

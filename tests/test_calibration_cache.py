@@ -58,15 +58,28 @@ def test_a_graph_with_other_constants_is_rejected_not_taken(case):
     """The instrument's sound speed is a constant of the bottom-track graph, as are the ping times: a case
     differing there has the same shape but another graph, and builds its own."""
     model_cache.clear()
-    _solved(case)
+    CalibrationProblem(case, CONFIG)
     slower = dataclasses.replace(case, instrument=dataclasses.replace(case.instrument,
                                                                       sound_speed_m_s=0.97 * case.instrument.sound_speed_m_s))
-    problem, _ = _solved(slower)
-    assert problem.graph == "built" and model_cache.stats()["rejected"] == 1 and model_cache.stats()["hits"] == 0
+    assert CalibrationProblem(slower, CONFIG).graph == "built"
+    assert model_cache.stats()["rejected"] == 1 and model_cache.stats()["hits"] == 0
     later = dataclasses.replace(case, pings=dataclasses.replace(case.pings, time_s=case.pings.time_s + 0.01))
-    assert _solved(later)[0].graph == "built" and model_cache.stats()["hits"] == 0
+    assert CalibrationProblem(later, CONFIG).graph == "built" and model_cache.stats()["hits"] == 0
 
 
 def test_an_assembled_problem_keeps_its_numbers_as_constants(case):
     problem = CalibrationProblem(case, dataclasses.replace(CONFIG, jacobian="assembled"))
     assert problem.graph == "assembled" and np.array_equal(problem.parameters(), problem.weights())
+
+
+def test_a_process_keeps_a_few_calibration_graphs(monkeypatch):
+    """Symbolic calibration graphs reach tens of MB: at most KEPT_GRAPHS of them stay, whatever the cache's size."""
+    from adcpdyn.estimators.calibration.problem import KEPT_GRAPHS
+
+    monkeypatch.delenv(model_cache.CACHE_ENV, raising=False)
+    model_cache.clear()
+    sc = get_scenario("pool_m1")
+    for seconds in range(10, 10 + 2 * (KEPT_GRAPHS + 2), 2):  # runs of other lengths: graphs of other shapes
+        case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=float(seconds))), seed=1)
+        assert CalibrationProblem(case, CONFIG).graph == "built"
+    assert model_cache.stats()["kept"] == KEPT_GRAPHS < model_cache.capacity()

@@ -88,6 +88,10 @@ VCE_WALK_ITERATIONS = 3
 # unchanged to 1e-8; at 1e-3 it takes four, the same optimum to 1e-6 of the unknowns' scale
 REFIT_MU_INIT = 1e-3
 MIN_HEADING_SPAN = 0.1  # heading_span above which the one-cycle compass deviation is estimated (0.5: all round)
+# symbolic problems whose graphs a process keeps (:mod:`..model_cache`): the largest (a symbolic Jacobian's cost near
+# ASSEMBLED_MIN_COST) hold about 75 MB each (pool_m1 windows of 26-70 pings: 5-75 MB a graph, 2026-12-03); enough for
+# a case calibrated again, its moving-bed test's second problem, and batch jobs of one shape
+KEPT_GRAPHS = 4
 CONFOUNDED_R2 = 0.9  # share of a yaw's variance explained by the bed's: the two are not told apart
 
 
@@ -266,7 +270,7 @@ class CalibrationProblem:
             self._take_built(kept)
         else:
             self._build_symbolic()
-            model_cache.keep(self.shape_key, self)
+            model_cache.keep(self.shape_key, self, most=KEPT_GRAPHS)
 
     # ------------------------------------------------------------------ the NLP
     def _assemble(self) -> None:
@@ -279,7 +283,7 @@ class CalibrationProblem:
         e_z, raw_z, g_z, r_z, st_z = ca.substitute([weights * model.raw, model.raw, model.g, model.r, model.ypr_st], *subs)
         self.nlp = {"x": z, "p": weights, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
         self.jacobian_fun = model.row_jacobian(z, subs, self.threads)
-        self._functions(z, weights, e_z, raw_z, ca.vec(r_z.T), st_z, g_z, None)
+        self._functions(z, weights, e_z, raw_z, ca.vec(r_z.T), st_z, g_z)
 
     def _build_symbolic(self) -> None:
         """The NLP over z with p = [weights; recorded numbers; scales] (:meth:`parameters`), expanded to SX
@@ -297,15 +301,16 @@ class CalibrationProblem:
             raw_z, r_vec, st_z = ex["raw"], ex["r"], ex["st"]
         self.jacobian_fun = ca.Function("residual_jacobian", [z, p], [ca.jacobian(e_z, z)])
         self.graph = "built"
-        self._functions(z, p, e_z, raw_z, r_vec, st_z, g_z, None)
+        self._functions(z, p, e_z, raw_z, r_vec, st_z, g_z)
 
-    def _functions(self, z, p, e_z, raw_z, r_vec, st_z, g_z, like) -> None:
+    def _functions(self, z, p, e_z, raw_z, r_vec, st_z, g_z) -> None:
+        """The residuals, the lever arms, angles and constraints with their Jacobians, and the solver."""
         self.residual_fun = ca.Function("residuals", [z, p], [e_z, raw_z])
         self.derived_fun = ca.Function("derived", [z, p], [r_vec, st_z, ca.jacobian(r_vec, z), ca.jacobian(st_z, z), g_z,
                                                            ca.jacobian(g_z, z)])
-        self._build_solver(like)
+        self._build_solver()
 
-    def _build_solver(self, like) -> None:
+    def _build_solver(self, like=None) -> None:
         tic = time.perf_counter()
         self.solver = build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
                                    residual_fun=self.residual_fun, like=like)
