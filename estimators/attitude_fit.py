@@ -34,6 +34,11 @@ WINDOW_SAMPLES = 1000  # the window is a property of the sampling: its first sam
 MAX_TILT_AMPLITUDE_RAD = np.pi / 2  # a roll or pitch mode beyond a quarter turn is no motion: an alias the samples do not bound
 PERIODOGRAM_SAMPLES = 800
 DENSE_NYQUIST_FRACTION = 0.75  # long records sampled this densely get FFT candidates
+# frequencies of a half-width candidate grid above which a record (jittered, so no FFT) gets its candidates from
+# COARSE_WINDOWS windows of its own: at 16 rad/s, records longer than about 3200 s (an hour's transect keeps its grid)
+COARSE_MAX_FREQUENCIES = 16384
+COARSE_WINDOWS = 3
+COARSE_WINDOW_FREQUENCIES = 8192  # each window's own grid: about 1600 s long at 16 rad/s
 
 
 @dataclass(frozen=True)
@@ -98,7 +103,10 @@ def periodogram_peak(t, x, lo, hi, n_candidates=5) -> float:
     A long record sampled densely (mean Nyquist at least ``DENSE_NYQUIST_FRACTION`` of
     ``hi``) gets its candidates from an FFT of the record interpolated to a uniform grid
     instead: the half-width grid has as many frequencies as the record has seconds
-    times the band, and Lomb-Scargle's cost is that times the samples.
+    times the band, and Lomb-Scargle's cost is that times the samples. A record too
+    long for that grid whose jittered samples resolve beyond their mean Nyquist rate
+    (no FFT) gets them from windows of its own (:func:`_window_candidates`), the fine
+    grids then spanning the windows' peak width at a quarter of the record's.
     """
     t = np.asarray(t, dtype=float)
     x = np.atleast_2d(np.asarray(x, dtype=float).T).T
@@ -106,20 +114,48 @@ def periodogram_peak(t, x, lo, hi, n_candidates=5) -> float:
     width = 2 * np.pi / (t[-1] - t[0])
     dense = t.size > PERIODOGRAM_SAMPLES and np.pi / np.median(np.diff(t)) >= DENSE_NYQUIST_FRACTION * hi
     candidates = _fft_candidates(t, x, lo, hi, n_candidates) if dense else None
-    if t.size > PERIODOGRAM_SAMPLES:
-        keep = np.unique(np.linspace(0, t.size - 1, PERIODOGRAM_SAMPLES).astype(int))
-        t, x = t[keep], x[keep]
+    span = width / 2  # how far from a candidate the maximum may lie
+    if candidates is None and (hi - lo) / (width / 2) > COARSE_MAX_FREQUENCIES:  # a long record, jittered samples
+        candidates, span = _window_candidates(t, x, lo, hi, n_candidates)
+    t, x = _thinned(t, x)
     power = lambda grid: lomb_scargle(t, x, grid).sum(axis=1)
     if candidates is None:
         coarse = np.arange(lo, hi, width / 2)
         candidates = coarse[np.argsort(power(coarse))[::-1][:n_candidates]]
     best_omega, best_power = lo, -np.inf
+    n_fine = max(41, int(np.ceil(2 * span / (width / 4))) + 1)  # at most a quarter of the record's peak width apart
     for omega in candidates:
-        fine = np.linspace(max(lo, omega - width / 2), min(hi, omega + width / 2), 41)
+        fine = np.linspace(max(lo, omega - span), min(hi, omega + span), n_fine)
         pf = power(fine)
         if pf.max() > best_power:
             best_omega, best_power = fine[int(np.argmax(pf))], pf.max()
     return float(best_omega)
+
+
+def _thinned(t, x):
+    """At most ``PERIODOGRAM_SAMPLES`` evenly spread samples."""
+    if t.size <= PERIODOGRAM_SAMPLES:
+        return t, x
+    keep = np.unique(np.linspace(0, t.size - 1, PERIODOGRAM_SAMPLES).astype(int))
+    return t[keep], x[keep]
+
+
+def _window_candidates(t, x, lo, hi, n_candidates) -> tuple[np.ndarray, float]:
+    """Candidate peaks of a record too long for a half-width grid over [lo, hi] (more than
+    ``COARSE_MAX_FREQUENCIES`` frequencies, each a pass over the thinned samples: an 18-hour record of
+    jittered pings had 331000): each of ``COARSE_WINDOWS`` windows (the start, the middle, the end), long
+    enough for a grid of ``COARSE_WINDOW_FREQUENCIES``, gives its highest peaks on its own half-width grid;
+    and how far from a candidate the record's maximum may lie (half the windows' peak width)."""
+    length = COARSE_WINDOW_FREQUENCIES * np.pi / (hi - lo)
+    starts = np.linspace(t[0], t[-1] - length, COARSE_WINDOWS)
+    coarse = np.arange(lo, hi, np.pi / length)
+    found = []
+    for a in starts:
+        inside = (t >= a) & (t <= a + length)
+        tw, xw = _thinned(t[inside], x[inside])
+        if tw.size > 3:
+            found.append(coarse[np.argsort(lomb_scargle(tw, xw, coarse).sum(axis=1))[::-1][:n_candidates]])
+    return np.unique(np.concatenate(found)), np.pi / length
 
 
 def _fft_candidates(t, x, lo, hi, n_candidates) -> np.ndarray:

@@ -495,6 +495,24 @@ def test_periodogram_finds_a_short_lived_mode_in_a_long_record():
     assert abs(periodogram_peak(t, x, 0.2, 16.0) - omega) < decay
 
 
+def test_a_long_jittered_record_takes_its_candidates_from_windows_and_finds_the_grids_peak(monkeypatch):
+    """Jittered pings resolve modes beyond their mean Nyquist rate (no FFT), so a long record's half-width grid
+    has as many frequencies as seconds times the band (an 18-hour record: 331000, each a pass over the thinned
+    samples). Its candidates come from windows of the record instead; the peak is the whole grid's to a
+    quarter of the record's peak width, and the mode's to half of it."""
+    from adcpdyn.estimators import attitude_fit
+
+    rng = np.random.default_rng(1)
+    t = np.cumsum(rng.uniform(0.5, 0.8, size=12300))  # 8000 s of pings at ~1.5 Hz
+    x = 0.02 * np.sin(1.5713 * t + 0.3) + 0.01 * np.sin(2.0941 * t) + 0.005 * rng.standard_normal(t.size)
+    hi, width = attitude_fit.resolved_omega(t), 2 * np.pi / (t[-1] - t[0])
+    assert (hi - 0.2) / (width / 2) > attitude_fit.COARSE_MAX_FREQUENCIES  # the windows' case
+    windows = attitude_fit.periodogram_peak(t, x, 0.2, hi)
+    monkeypatch.setattr(attitude_fit, "COARSE_MAX_FREQUENCIES", 10**9)  # the whole half-width grid
+    grid = attitude_fit.periodogram_peak(t, x, 0.2, hi)
+    assert abs(windows - grid) < width / 4 and abs(windows - 1.5713) < width / 2
+
+
 def test_uncertainty_rank_is_not_set_by_one_near_exact_channel():
     """One unknown known to 1e-7 (a noise-free heading: information 1e14) beside one known to 1
     and one the data do not touch: the second keeps its standard error 1 (a threshold relative
