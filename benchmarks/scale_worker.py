@@ -1,6 +1,7 @@
 """One size of ``adcpdyn bench scale``, run in its own process so that its peak memory is its own.
 
-``python -m adcpdyn.benchmarks.scale_worker N_PINGS SEED`` prints one JSON line.
+``python -m adcpdyn.benchmarks.scale_worker N_PINGS SEED [SCENARIO]`` prints one JSON line (the scenario's run
+stretched to about N_PINGS pings at its own ping rate; ``pool_m0`` at ~5 Hz by default).
 """
 
 from __future__ import annotations
@@ -16,16 +17,18 @@ SCENARIO = "pool_m0"
 HESSIAN = "gauss-newton"  # what "auto" picks for long runs; fixed so that every size solves the same way
 
 
-def long_run(n_pings: int):
-    """pool_m0 stretched to about ``n_pings`` pings at ~5 Hz (same platform, motion and noise)."""
+def long_run(n_pings: int, scenario: str = SCENARIO):
+    """pool_m0 stretched to about ``n_pings`` pings at ~5 Hz (same platform, motion and noise); another
+    scenario stretched at its own ping rate."""
     from ..cases.scenario import get_scenario
 
-    sc = get_scenario(SCENARIO)
-    run = dataclasses.replace(sc.run, duration_s=n_pings * sum(PING_INTERVAL_S) / 2, ping_interval_s=PING_INTERVAL_S)
+    sc = get_scenario(scenario)
+    interval = PING_INTERVAL_S if scenario == SCENARIO else tuple(sc.run.ping_interval_s)
+    run = dataclasses.replace(sc.run, duration_s=n_pings * sum(interval) / 2, ping_interval_s=interval)
     return dataclasses.replace(sc, run=run)
 
 
-def measure(n_pings: int, seed: int) -> dict:
+def measure(n_pings: int, seed: int, scenario: str = SCENARIO) -> dict:
     """Simulate, then calibrate (one start, one worker) and time each step; peak RSS in MB."""
     from ..estimators.statistics.evaluation import calibration_errors
     from ..cases.simulation import simulate
@@ -34,7 +37,7 @@ def measure(n_pings: int, seed: int) -> dict:
 
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     tic = time.perf_counter()
-    case = simulate(long_run(n_pings), seed=seed)
+    case = simulate(long_run(n_pings, scenario), seed=seed)
     sim = time.perf_counter() - tic
     r, setup, solve = timed_calibration(case, n_starts=1, seed=seed, workers=1, solver=SolverOptions(hessian=HESSIAN))
     return {"n_pings": case.pings.n, "seed": seed, "simulate_s": sim, "setup_s": setup, "solve_s": solve,
@@ -44,4 +47,4 @@ def measure(n_pings: int, seed: int) -> dict:
 
 
 if __name__ == "__main__":
-    print(json.dumps(measure(int(sys.argv[1]), int(sys.argv[2]))))
+    print(json.dumps(measure(int(sys.argv[1]), int(sys.argv[2]), *sys.argv[3:4])))
