@@ -22,6 +22,7 @@ def measure(scenario: str, repeats: int = 3) -> list[dict]:
     from .common import timed_calibration
 
     case = simulate(get_scenario(scenario), seed=1)
+    before = os.environ.get(model_cache.CACHE_ENV)  # the caller's setting, put back after
     rows = []
     for keep in ("0", str(model_cache.DEFAULT_SIZE)):
         os.environ[model_cache.CACHE_ENV] = keep
@@ -34,7 +35,10 @@ def measure(scenario: str, repeats: int = 3) -> list[dict]:
             times.append((setup, solve, r.graph, r.objective))
         rows.append({"scenario": scenario, "n_pings": case.pings.n, "cache": keep != "0", "setup_s": [t[0] for t in times],
                      "solve_s": [t[1] for t in times], "graph": [t[2] for t in times], "objective": [t[3] for t in times]})
-    os.environ.pop(model_cache.CACHE_ENV)
+    if before is None:
+        os.environ.pop(model_cache.CACHE_ENV)
+    else:
+        os.environ[model_cache.CACHE_ENV] = before
     return rows
 
 

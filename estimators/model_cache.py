@@ -73,15 +73,15 @@ def find(key, model) -> Built | None:
         candidates = list(_kept.get(key, ()))
     signature, points = model.graph_signature(), None
     for other in candidates:
-        if other.signature == signature and points is None:
-            points = model.probe_points()  # the new model's own numbers, once for every candidate
-        if other.signature == signature and model.same_graph(other.parts, points):
-            with _lock:
-                _stats["hits"] += 1
-                other.taken += 1
-                if key in _kept:
-                    _kept.move_to_end(key)
-            return other
+        if other.signature == signature:
+            points = model.probe_points() if points is None else points  # the new model's own numbers, once
+            if model.same_graph(other.parts, points):
+                with _lock:
+                    _stats["hits"] += 1
+                    other.taken += 1
+                    if key in _kept:
+                        _kept.move_to_end(key)
+                return other
         with _lock:
             _stats["rejected"] += 1
     with _lock:
@@ -110,7 +110,31 @@ def keep(key, model, most: int | None = None) -> None:
                     del _kept[k]
 
 
-def agree(a, b) -> bool:
+def probe(check, x_of_z, data, lbz, ubz, parameters_at) -> list:
+    """A model's own values at ``CHECK_POINTS`` random unknowns z (uniform in [-1, 1], within the bounds
+    [lbz, ubz]) on its recorded numbers: ``check(x_of_z(z), data)`` is its undifferentiated graph (cheap),
+    its first output the residuals. Per point (z, the NLP's parameters with unit weights, the outputs)."""
+    rng = np.random.default_rng(20261201)
+    points = []
+    for _ in range(CHECK_POINTS):
+        z = np.clip(rng.uniform(-1.0, 1.0, lbz.size), lbz, ubz)
+        values = [np.asarray(v, dtype=float).ravel() for v in check(x_of_z(z), data)]
+        points.append((z, parameters_at(np.ones(values[0].size)), values))
+    return points
+
+
+def agree_at(points: list, evaluate) -> bool:
+    """Whether ``evaluate(z, p)`` (a kept graph's outputs, in :func:`probe`'s order) gives the model's own
+    values at every probe point; a point with more than a tenth of its residuals not finite proves nothing."""
+    for z, p, values in points:
+        if np.mean(np.isfinite(values[0])) < 0.9:
+            return False
+        if not all(_agree(a, b) for a, b in zip(values, evaluate(z, p), strict=True)):
+            return False
+    return True
+
+
+def _agree(a, b) -> bool:
     """Two evaluations of a graph at one point agree (relative to the first's scale, NaN where NaN)."""
     a, b = np.asarray(a, dtype=float).ravel(), np.asarray(b, dtype=float).ravel()
     return a.shape == b.shape and bool(np.allclose(a, b, rtol=CHECK_RTOL, equal_nan=True,

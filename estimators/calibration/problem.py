@@ -326,31 +326,20 @@ class CalibrationProblem:
         return len(self.names), self.data.size, int(self.model.raw.shape[0])
 
     def probe_points(self) -> list:
-        """This problem's residuals, constraints, lever arms and angles from its own (undifferentiated) graph
-        at random unknowns within the bounds, on its recorded numbers: per point (z, p with unit weights,
-        those four)."""
+        """This problem's residuals, constraints, lever arms and angles from its own graph at random unknowns
+        on its recorded numbers (:func:`..model_cache.probe`)."""
         m = self.model
-        fresh = ca.Function("check", [m.x, m.data_sym], [m.raw, m.g, ca.vec(m.r.T), m.ypr_st])
-        rng = np.random.default_rng(20261203)
-        lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
-        points = []
-        for _ in range(model_cache.CHECK_POINTS):
-            z = np.clip(rng.uniform(-1.0, 1.0, self.scale.size), lbz, ubz)
-            values = [np.asarray(v, dtype=float).ravel() for v in fresh(z * self.scale, self.data)]
-            points.append((z, self.parameters_at(np.ones(values[0].size)), values))
-        return points
+        return model_cache.probe(ca.Function("check", [m.x, m.data_sym], [m.raw, m.g, ca.vec(m.r.T), m.ypr_st]),
+                                 lambda z: z * self.scale, self.data, self.lbx / self.scale, self.ubx / self.scale,
+                                 self.parameters_at)
 
     def same_graph(self, parts: dict, points: list) -> bool:
         """Whether a kept problem's ``parts`` compute this problem's residuals, constraints, lever arms and
         angles at its :meth:`probe_points`."""
-        for z, p, (raw, g, r, st) in points:
-            if np.mean(np.isfinite(raw)) < 0.9:
-                return False
-            derived = parts["derived_fun"](z, p)
-            if not (model_cache.agree(raw, parts["residual_fun"](z, p)[1]) and model_cache.agree(r, derived[0])
-                    and model_cache.agree(st, derived[1]) and model_cache.agree(g, derived[4])):
-                return False
-        return True
+        def evaluate(z, p):
+            r, st, _, _, g, _ = parts["derived_fun"](z, p)
+            return [parts["residual_fun"](z, p)[1], g, r, st]
+        return model_cache.agree_at(points, evaluate)
 
     def _take_built(self, kept: "model_cache.Built") -> None:
         """The NLP, Functions and Jacobian of a problem of the same graph, and a solver of its own sharing that

@@ -236,30 +236,17 @@ class GapModel:
         return self.scale.size, self.data.size, self.constant.tobytes()
 
     def probe_points(self) -> list:
-        """This model's residuals and constraints from its own symbolic graph (not differentiated: cheap) at
-        random unknowns (within the bounds, pins at theirs) on its recorded numbers: per point (z, the NLP's
-        parameters with unit weights, residuals, constraints)."""
+        """This model's residuals and constraints from its own graph at random unknowns (pins at theirs) on
+        its recorded numbers (:func:`..model_cache.probe`)."""
         sm = self.model
-        fresh = ca.Function("check", [sm.x, sm.data_sym], [sm.raw, sm.g])
-        rng = np.random.default_rng(20261201)
-        lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
-        points = []
-        for _ in range(model_cache.CHECK_POINTS):
-            z = np.clip(rng.uniform(-1.0, 1.0, self.scale.size), lbz, ubz)
-            x = np.where(self.constant, self.lbx, z * self.scale)
-            raw, g = (np.asarray(v, dtype=float).ravel() for v in fresh(x, self.data))
-            points.append((z, self.parameters_at(np.ones(raw.size)), raw, g))
-        return points
+        return model_cache.probe(ca.Function("check", [sm.x, sm.data_sym], [sm.raw, sm.g]),
+                                 lambda z: np.where(self.constant, self.lbx, z * self.scale), self.data,
+                                 self.lbx / self.scale, self.ubx / self.scale, self.parameters_at)
 
     def same_graph(self, parts: dict, points: list) -> bool:
         """Whether a kept graph's ``parts`` compute this model's residuals and constraints at its
         :meth:`probe_points`."""
-        for z, p, raw, g in points:
-            if np.mean(np.isfinite(raw)) < 0.9:
-                return False
-            if not (model_cache.agree(raw, parts["raw_fun"](z, p)) and model_cache.agree(g, parts["constraint_fun"](z))):
-                return False
-        return True
+        return model_cache.agree_at(points, lambda z, p: [parts["raw_fun"](z, p), parts["constraint_fun"](z)])
 
     def _take_built(self, kept: "model_cache.Built") -> None:
         """The symbols, graph and Jacobian of a model of the same graph (:mod:`..model_cache`), and a solver of
