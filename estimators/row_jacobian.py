@@ -22,12 +22,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..solvers.compiled import compiled
-from ..solvers.ping_map import CHUNK
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
 DENSE_BASIS_ENTRIES = 500_000  # a block's velocity basis (pings x knots) up to this size is summed through dense
-GRAM_ROWS = 1024  # rows a weighted per-row Jacobian chunk holds in the Gram sum (a few MB: stays in cache)
+PIECE_ROWS = 1024  # rows per evaluation of a per-row Jacobian map (its output a few MB: stays in cache for the sums)
 
 
 def _pattern_of(sparsity: ca.Sparsity) -> sp.csr_matrix:
@@ -92,7 +91,7 @@ class RowJacobian:
             self._index.append(index)
             self._cols.append(np.unique(ds[index].indices) if index.size else np.zeros(0, dtype=int))
             self._knots.append(b.knot_columns if b.knot_columns is not None else knot_columns)
-        self._jac, self._chunks = [], []
+        self._jac, self._chunks, self._groups = [], [], []
         for b in blocks:
             d, v, s = (ca.SX.sym(n, b.fun.sparsity_in(i)) for i, n in enumerate(("d", "v", "s")))
             y = b.fun(d, v, s)
@@ -101,13 +100,16 @@ class RowJacobian:
             n = b.data.shape[1]
             if compile:
                 f = compiled(f)
-            # at least one chunk per thread, none above CHUNK rows: at most two chunk sizes, whose maps
-            # cost their size to build (one map over 10^5 rows took 0.4 s)
-            edges = np.linspace(0, n, max(1, min(max(threads, -(-n // CHUNK)), n)) + 1).astype(int)
-            chunks = list(zip(edges[:-1], edges[1:]))
+            # pieces of PIECE_ROWS rows and the rest: two map sizes, cheap to build (a map's construction grows
+            # faster than its size: 0.17 s for 14285 rows of the deep model), and a piece's per-row Jacobians
+            # (1024 rows x 8 outputs x 28 inputs: 1.8 MB) are summed while they are still in cache
+            chunks = [(lo, min(lo + PIECE_ROWS, n)) for lo in range(0, n, PIECE_ROWS)]
             maps = {m: f.map("row_jacobians", "serial", m, [2], []) for m in {hi - lo for lo, hi in chunks}}  # s shared
             self._jac.append([maps[hi - lo] for lo, hi in chunks])
             self._chunks.append(chunks)
+            # the pieces in one contiguous run per thread
+            edges = np.linspace(0, len(chunks), min(threads, len(chunks)) + 1).astype(int)
+            self._groups.append([range(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a])
         self._data = [np.ascontiguousarray(b.data.T) for b in blocks]  # (n, n_d): CasADi's column-major (n_d, n)
         self._pool = _pool(threads) if threads > 1 else None
         self._local = threading.local()  # evaluation buffers are per thread (multistart solves in threads)
@@ -126,7 +128,7 @@ class RowJacobian:
     def _evaluate(self, i: int, v: np.ndarray, s: np.ndarray):
         """Per-row Jacobians of block i, (n, k, 3) and (n, k, ns), through a zero-copy FunctionBuffer."""
         parts, out = self._prepare(i, v, s)
-        self._map(lambda part: part[1](), parts)
+        self._map(lambda group: [parts[c][1]() for c in group], self._groups[i])
         return out
 
     def _map(self, fun, items) -> list:
@@ -156,6 +158,30 @@ class RowJacobian:
             buf.set_arg(1, memoryview(v_in[lo:hi]))
             buf.set_arg(2, memoryview(s_in))
         return parts, out
+
+    def _piece(self, i: int, c: int, s: np.ndarray) -> np.ndarray:
+        """Block i's per-row Jacobians in s on piece c's rows, (rows, k, ns), in this thread's scratch (valid
+        until its next piece of that size), the velocity zero (a block without knots)."""
+        pieces = getattr(self._local, "pieces", None)
+        if pieces is None:
+            pieces = self._local.pieces = {}
+        lo, hi = self._chunks[i][c]
+        key = (i, hi - lo)
+        if key not in pieces:
+            b, f = self.blocks[i], self._jac[i][c]
+            k, ns = b.fun.size1_out(0), f.size1_in(2)
+            buf, run = f.buffer()
+            out = (np.empty((hi - lo, k, 3)), np.empty((hi - lo, k, ns)))
+            v = np.zeros((hi - lo, 3))
+            buf.set_arg(1, memoryview(v))
+            buf.set_res(0, memoryview(out[0]))
+            buf.set_res(1, memoryview(out[1]))
+            pieces[key] = (buf, run, out, v)  # the buffer holds pointers into these arrays: kept as long
+        buf, run, out, _ = pieces[key]
+        buf.set_arg(0, memoryview(self._data[i][lo:hi]))
+        buf.set_arg(2, memoryview(s))
+        run()
+        return out[1]
 
     def _has_knots(self, index: int) -> bool:
         return self.blocks[index].velocity_basis is not None and self._knots[index] is not None
@@ -331,22 +357,23 @@ class RowJacobian:
                 knotted.append(index)
                 continue
             k, n, rows, sc, a, ds_b = self._block(index, w, ds_dz)
-            parts, (_, js) = self._prepare(index, np.zeros((n, 3)), s[self._index[index]])
+            if n == 0:
+                continue
+            s_b = np.ascontiguousarray(s[self._index[index]])
             ea = None if e is None else np.asarray(e[rows]).reshape(k, n).T
-            ns = js.shape[2]
+            ns = s_b.size
 
-            def chunk(c):  # evaluate one chunk of rows and sum its share while it is fresh, on the chunk's thread
-                parts[c][1]()
+            def group_sums(group):  # a thread's pieces, each evaluated into its scratch and summed while fresh
                 M, g = np.zeros((ns, ns)), np.zeros(ns)
-                for lo in range(*self._chunks[index][c], GRAM_ROWS):
-                    hi = min(lo + GRAM_ROWS, self._chunks[index][c][1])
-                    jw = (js[lo:hi] * a[lo:hi, :, None]).reshape(-1, ns)
-                    M += jw.T @ jw
+                for c in group:
+                    lo, hi = self._chunks[index][c]
+                    jw = (self._piece(index, c, s_b) * a[lo:hi, :, None]).reshape(-1, ns)
+                    M += jw.T @ jw  # numpy takes A.T @ A to BLAS syrk
                     if ea is not None:
                         g += jw.T @ ea[lo:hi].ravel()
                 return M, g
 
-            sums = self._map(chunk, range(len(parts)))
+            sums = self._map(group_sums, self._groups[index])
             M, g = sum(m for m, _ in sums), sum(v for _, v in sums)
             G[np.ix_(sc, sc)] += ds_b.T @ M @ ds_b
             if grad is not None:

@@ -378,11 +378,13 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     velocity knots, GNSS and the deep-water model, head sensor with heading misalignment, and the
     latter with the beams' attitude from the sensor's samples (per-row attitude data), and with a
     velocity per ping under the random-walk prior (its rows linear in the velocities). Three
-    cores and one worker: the assembled problem's per-row Jacobians are split over three threads."""
-    from adcpdyn.estimators import measurement_model
+    cores and one worker: the assembled problem's per-row Jacobians are split over three threads,
+    evaluated in pieces of 7 rows (and each block's rest), so every thread sums several pieces."""
+    from adcpdyn.estimators import measurement_model, row_jacobian
     from adcpdyn.estimators.calibration.problem import CalibrationProblem
 
     monkeypatch.setattr(measurement_model.os, "cpu_count", lambda: 3)
+    monkeypatch.setattr(row_jacobian, "PIECE_ROWS", 7)
 
     if kind == "head_sensor_still":
         sc = get_scenario("pool_m0")
@@ -416,6 +418,9 @@ def test_assembled_jacobian_equals_casadi_jacobian(kind, monkeypatch):
     assert np.max(np.abs(assembled.toarray() - symbolic)) < 1e-9 * np.max(np.abs(symbolic))
     gram = symbolic.T @ symbolic  # the Gauss-Newton Hessian's J^T J, formed block by block without J
     assert np.max(np.abs(problems["assembled"].jacobian_fun.gram(z, w) - gram)) < 1e-9 * np.max(np.abs(gram))
+    G, grad = problems["assembled"].jacobian_fun.gram_and_gradient(z, w, residuals[1])  # and J^T e in the same pass
+    assert np.max(np.abs(G - gram)) < 1e-9 * np.max(np.abs(gram))
+    assert np.max(np.abs(grad - symbolic.T @ residuals[1])) < 1e-9 * np.max(np.abs(symbolic.T @ residuals[1]))
     # J's products without J (the sandwich's J @ P_Q), knots or not
     M = np.random.default_rng(3).standard_normal((symbolic.shape[1], 4))
     JM = problems["assembled"].jacobian_fun.at(z, w) @ M
@@ -600,6 +605,45 @@ def test_noise_levels_settle_at_their_fixed_point_whatever_they_start_from():
     for group, level in a.noise_sigma.items():
         assert abs(b.noise_sigma[group] / level - 1.0) < 0.02, group
     assert np.max(np.abs(a.radius_vectors_m - b.radius_vectors_m) / a.radius_vectors_se_m) < 0.1
+
+
+def test_levels_already_at_their_fixed_point_are_not_refitted():
+    """A calibration solved again at the levels it settled at: the first re-estimation moves none by 1 %,
+    so its solution stands without a refit (the message says so), the same lever arms as the first to
+    0.01 SE and the same levels to 1 %."""
+    case = simulate(get_scenario("pool_m0"), seed=1)
+    problem = CalibrationProblem(case, CalibrationConfig(n_starts=2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        first = problem.solve()
+        again = problem.solve()  # problem.sigma now holds the fixed point
+    assert "refit:" in first.multistart.message
+    assert "without a refit" in again.multistart.message and "refit:" not in again.multistart.message
+    assert again.success and again.multistart.status == first.multistart.status
+    for group, level in first.noise_sigma.items():
+        assert abs(again.noise_sigma[group] / level - 1.0) < 0.01, group
+    assert np.max(np.abs(again.radius_vectors_m - first.radius_vectors_m) / first.radius_vectors_se_m) < 0.01
+
+
+def test_put_in_equals_casadi_substitute():
+    """SurveyModel.put_in (a Function call per expression) gives casadi.substitute's expressions: the
+    residuals, constraints and lever arms of a calibration with the unknowns and numbers put in agree at
+    random points, and a symbol neither replaces stays free."""
+    problem = CalibrationProblem(simulate(get_scenario("pool_m0"), seed=1), CalibrationConfig(n_starts=1))
+    model = problem.model
+    z = ca.MX.sym("z", model.x.shape[0])
+    data = ca.DM(problem.data)
+    exprs = [model.raw, model.g, ca.vec(model.r)]
+    ours = model.put_in(exprs, problem.scale * z, data)
+    theirs = ca.substitute(exprs, [model.x, model.data_sym], [problem.scale * z, data])
+    f = ca.Function("both", [z], ours + theirs)
+    for x in np.random.default_rng(4).uniform(0.5, 1.5, (2, z.shape[0])) * problem.start_points(1, 1)[0]:
+        out = [np.asarray(o).ravel() for o in f(x)]
+        for a, b in zip(out[:3], out[3:]):
+            assert np.array_equal(np.isnan(a), np.isnan(b)) and np.allclose(a, b, rtol=1e-12, atol=0, equal_nan=True)
+    y = ca.MX.sym("y")
+    (free,) = model.put_in([y * model.g[0]], problem.scale * z)
+    assert ca.depends_on(free, y) and ca.depends_on(free, z) and not ca.depends_on(free, model.x)
 
 
 @pytest.mark.slow  # 25 s: `make test-slow`

@@ -281,7 +281,7 @@ class GapModel:
             group = list(group)  # a run's reference channels, or a stretch between them
             a, b = group[0], group[-1] + 1
             if shifts or (a, b) not in self._groups:
-                parts = ca.substitute(model.raw_parts[a:b], [model.x, model.data_sym], [self._x_of_z, self._d])
+                parts = model.put_in(model.raw_parts[a:b], self._x_of_z, self._d)
                 r = ca.vertcat(*parts)
                 entry = (r, ca.jacobian(w[int(offsets[a]):int(offsets[b])] * r, z))
                 if not shifts:
@@ -295,7 +295,7 @@ class GapModel:
         self.residual_fun = ca.Function("residuals", [z, p], [e_z, raw_z, J_z])
         self.jacobian_fun = ca.Function("residual_jacobian", [z, p], [J_z])
         self.raw_fun = ca.Function("raw_residuals", [z, p], [raw_z])
-        g_z = ca.substitute([model.g], [model.x], [self._x_of_z])[0]
+        g_z = model.put_in([model.g], self._x_of_z)[0]
         self.constraint_fun = ca.Function("constraints", [z], [g_z])
         self.nlp = {"x": z, "p": p, "f": 0.5 * ca.sumsqr(e_z), "g": g_z}
         self.weighted_fun = ca.Function("weighted_residuals", [z, p], [e_z])
