@@ -762,3 +762,37 @@ def test_attitude_prefit_searches_regular_samples_up_to_their_nyquist_only():
     f = fit_modes(t, np.column_stack([y, 0.5 * y]), 0.0)
     assert f.modes.shape[0] >= 1 and abs(f.modes[0, 0] - 1.2) < 0.01
     assert np.all(np.hypot(f.cs[..., 0], f.cs[..., 1]) < MAX_TILT_AMPLITUDE_RAD)
+
+
+def test_projected_mode_fit_is_the_joint_fit():
+    """The pre-fit refines only the modes' frequencies and decays (variable projection): the gradient of
+    its Jacobian (Kaufman's) against central differences of its residuals, and its optimum against
+    scipy's joint fit of modes, biases and (C, S) on two damped modes in noise."""
+    from scipy.optimize import least_squares
+
+    from adcpdyn.estimators.attitude_fit import _design, _ProjectedModes
+
+    rng = np.random.default_rng(5)
+    t = np.sort(rng.uniform(0.0, 120.0, 900))
+    truth = np.array([[0.9, 0.02], [2.3, 0.05]])
+    coef = np.array([[0.01, -0.02], [0.03, 0.01], [-0.02, 0.015], [0.012, 0.0], [0.004, -0.01]])  # (1 + 2n, A)
+    Y = _design(t, truth, 10.0) @ coef + 0.002 * rng.standard_normal((t.size, 2))
+    scale = np.std(Y, axis=0)
+    fit = _ProjectedModes(t, Y, 10.0, scale)
+    theta = np.array([0.93, 0.03, 2.25, 0.04])
+    J = fit.jacobian(theta)
+    h = 1e-6
+    fd = np.column_stack([(fit.residuals(theta + h * e) - fit.residuals(theta - h * e)) / (2 * h) for e in np.eye(4)])
+    r = fit.residuals(theta)
+    assert np.allclose(J.T @ r, fd.T @ r, rtol=1e-6)  # Kaufman's Jacobian: the exact gradient
+    assert not np.allclose(J, fd, rtol=1e-3)  # though not the exact Jacobian away from the optimum
+    projected = least_squares(fit.residuals, theta, jac=fit.jacobian, x_scale="jac")
+
+    def joint(q):
+        return ((Y - _design(t, q[:4].reshape(2, 2), 10.0) @ q[4:].reshape(5, 2)) / scale).T.reshape(-1)
+
+    c0 = np.linalg.lstsq(_design(t, theta.reshape(2, 2), 10.0), Y, rcond=None)[0]
+    full = least_squares(joint, np.concatenate([theta, c0.reshape(-1)]), x_scale="jac")
+    assert abs(projected.cost / full.cost - 1) < 1e-9
+    assert np.allclose(projected.x, full.x[:4], rtol=1e-6, atol=1e-8)
+    assert np.allclose(fit.coefficients(projected.x), full.x[4:].reshape(5, 2), rtol=1e-5, atol=1e-8)
