@@ -599,14 +599,19 @@ class SurveyModel:
 
     def put_in(self, exprs: list, x, data=None) -> list:
         """``exprs`` with the unknowns ``x`` (and the recorded numbers ``data``) put in for ``self.x`` (and
-        ``self.data_sym``): each a call of a Function of its own, of the numbers only where it has symbols
-        besides x (so that its derivatives reach no other expression, nor 10^6 numbers' Jacobian), where
-        ``casadi.substitute``, which copies the graph, took 0.47 s on 10^5 pings' residuals and the
-        Function and its call 3 ms. Any other symbol stays free, as substitute leaves it."""
+        ``self.data_sym``). Recorded numbers given as constants (a DM: an assembled calibration's 10^6 of
+        them) go in by a call of a Function per expression, of the numbers only where it has symbols besides
+        x (so that its derivatives reach no other expression, nor 10^6 numbers' Jacobian): casadi.substitute,
+        which copies the graph, took 0.47 s on 10^5 pings' residuals, the Function and its call 3 ms.
+        Symbolic ones (an NLP's parameters, differentiated and expanded afterwards) by substitute: through
+        call nodes a diagnosis of diag_boat took 22.2 s, 7.5 s by substitute. Any other symbol stays free."""
+        if not isinstance(data, ca.DM):
+            syms, values = ([self.x], [x]) if data is None else ([self.x, self.data_sym], [x, data])
+            return ca.substitute(list(exprs), syms, values)
         out = []
         for e in exprs:
             f = ca.Function("put_in", [self.x], [e], {"allow_free": True})
-            if data is None or not f.has_free():
+            if not f.has_free():
                 out.append(f.call([x])[0])
             else:
                 f = ca.Function("put_in", [self.x, self.data_sym], [e], {"allow_free": True})

@@ -70,8 +70,11 @@ class RowJacobian:
 
     ``shared`` is the MX expression s(z); ``knot_columns`` (K, 3) the columns of z holding
     the knot velocities (for blocks that do not name their own) and ``knot_scale`` the
-    scale of z (x = scale z). ``threads``: each block's rows are split into this many
-    contiguous chunks evaluated at once (CasADi releases Python's lock while it evaluates).
+    scale of z (x = scale z). Each block's rows are evaluated in pieces of ``PIECE_ROWS``;
+    ``threads``: where the whole per-row Jacobians are asked for (J, its products, a block
+    with knots), the pieces are shared out to this many threads in contiguous runs (CasADi
+    releases Python's lock while it evaluates); the Gram pass of a block without knots
+    evaluates and sums its pieces in the caller's thread (:meth:`_pieces`).
     With ``compile`` the per-row Jacobians run as machine code (:mod:`~adcpdyn.solvers.compiled`,
     cached per machine).
     """
@@ -103,7 +106,7 @@ class RowJacobian:
             # pieces of PIECE_ROWS rows and the rest: two map sizes, cheap to build (a map's construction grows
             # faster than its size: 0.17 s for 14285 rows of the deep model), and a piece's per-row Jacobians
             # (1024 rows x 8 outputs x 28 inputs: 1.8 MB) are summed while they are still in cache
-            chunks = [(lo, min(lo + PIECE_ROWS, n)) for lo in range(0, n, PIECE_ROWS)]
+            chunks = [(lo, min(lo + PIECE_ROWS, n)) for lo in range(0, n, PIECE_ROWS)] or [(0, 0)]
             maps = {m: f.map("row_jacobians", "serial", m, [2], []) for m in {hi - lo for lo, hi in chunks}}  # s shared
             self._jac.append([maps[hi - lo] for lo, hi in chunks])
             self._chunks.append(chunks)
