@@ -236,8 +236,9 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
     lo, hi = omega_band or (max(2 * np.pi * 2 / duration, 0.2), resolved_omega(t))
     scale = np.maximum(np.std(Y, axis=0), 1e-6)
     modes = np.zeros((0, 2))
-    coef = np.linalg.lstsq(_design(t, modes, t_ref), Y, rcond=None)[0]  # (1 + 2n, A)
-    rss = float(np.sum(((Y - _design(t, modes, t_ref) @ coef) / scale) ** 2))
+    fit = _ProjectedModes(t, Y, t_ref, scale)
+    coef = fit.coefficients(modes.reshape(-1))  # (1 + 2n, A)
+    rss = float(np.sum(fit.residuals(modes.reshape(-1)) ** 2))
     trail = [{"modes": 0, "bic": _bic(rss, M * A, A)}]
     target = fixed_modes if fixed_modes is not None else max_modes
     for k in range(1, target + 1):
@@ -245,18 +246,10 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
         if np.ptp(resid) == 0 or lo >= hi:  # nothing left, or no frequency the samples resolve
             break
         omega = periodogram_peak(t, resid / scale, lo, hi)
-        best = None
-        for decay in DECAY_GRID_1_S:
-            trial = np.vstack([modes, [omega, decay]])
-            X = _design(t, trial, t_ref)
-            c = np.linalg.lstsq(X, Y, rcond=None)[0]
-            r = float(np.sum(((Y - X @ c) / scale) ** 2))
-            if best is None or r < best[0]:
-                best = (r, trial, c)
-        _, trial, _ = best
+        trials = [np.vstack([modes, [omega, decay]]).reshape(-1) for decay in DECAY_GRID_1_S]
+        trial = min(trials, key=lambda q: float(np.sum(fit.residuals(q) ** 2)))  # the decay grid's best start
         lower, upper = np.tile([lo, 0.0], k), np.tile([hi, MAX_DECAY_1_S], k)
-        fit = _ProjectedModes(t, Y, t_ref, scale)
-        sol = least_squares(fit.residuals, np.clip(trial.reshape(-1), lower, upper), jac=fit.jacobian,
+        sol = least_squares(fit.residuals, np.clip(trial, lower, upper), jac=fit.jacobian,
                             bounds=(lower, upper), x_scale="jac")
         c = fit.coefficients(sol.x)  # (1 + 2k, A)
         rss_k = float(2 * sol.cost)
