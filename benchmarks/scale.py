@@ -16,6 +16,7 @@ from .common import Target, machine, print_targets, run_worker, save_figure
 from .scale_worker import HESSIAN, PING_INTERVAL_S, SCENARIO
 
 LINEAR_TOLERANCE = 0.1  # exponent up to 1.1 counts as linear growth (timing noise)
+DEFAULT_STARTS = 24  # the largest size is calibrated again as `adcpdyn calibrate` would: its default multistart
 
 
 def growth_exponent(n, y) -> tuple[float, float]:
@@ -35,7 +36,7 @@ def bench_scale(sizes, seed: int = 1, time_limit_s: float = 600.0, memory_limit_
                 skipped.append({"n_pings": n, "reason": f"predicted {t_pred:.0f} s and {m_pred:.0f} MB from the sizes "
                                 f"measured (limits {time_limit_s:.0f} s, {memory_limit_mb:.0f} MB)"})
                 continue
-        row, why = run_worker("scale_worker", [n, seed], time_limit_s)
+        row, why = run_worker("scale_worker", [n, seed] + ([SCENARIO, DEFAULT_STARTS] if n >= 10**5 else []), time_limit_s)
         if row is None:
             skipped.append({"n_pings": n, "reason": why})
             break
@@ -73,6 +74,10 @@ def print_scale(res: dict) -> None:
         print("growth exponents, all sizes (log-log least squares): " + ", ".join(f"{k} {v:.2f}" for k, v in ex.items()))
         print("growth exponents, two largest sizes:                 " + ", ".join(f"{k} {v:.2f}" for k, v in last.items()))
     big = [r for r in res["rows"] if r["n_pings"] >= 10**5]
+    for r in [r for r in big if "default_calibration_s" in r]:
+        print(f"  {r['n_pings']} pings with the default {r['default_starts']} starts: {r['default_calibration_s']:.2f} s "
+              f"(set-up {r['default_setup_s']:.2f} s, solve {r['default_solve_s']:.2f} s; objective / one start's "
+              f"{r['default_objective_ratio']:.9f}; peak {r['default_peak_rss_mb']:.0f} MB): {r['default_message']}")
     t = big[0]["calibration_s"] if big else float("nan")
     label = "calibration of 1e5 pings < 10 s" + ("" if big else " (1e5 not run: see above)")
     b = last.get("calibration_s", float("nan"))

@@ -262,6 +262,22 @@ class Case:
         return new.replace(environment=dataclasses.replace(self.environment, water_depth_per_ping_m=depth,
                                                            water_depth_m=float(np.nanmedian(depth))))
 
+    def ping_subset(self, rows) -> "Case":
+        """The pings ``rows`` (indices or a mask) with every per-ping array (water profiles, per-ping
+        depth, truth); attitude, reference and positions kept whole (their own clocks)."""
+        rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, dtype=int)
+        p, env, w, tr = self.pings, self.environment, self.water, self.truth
+        take = lambda a: None if a is None else np.asarray(a)[rows]
+        changes = {"pings": Pings(time_s=p.time_s[rows], bt_radial_m_s=p.bt_radial_m_s[rows], bt_range_m=take(p.bt_range_m)),
+                   "environment": dataclasses.replace(env, water_depth_per_ping_m=take(env.water_depth_per_ping_m))}
+        if w is not None:
+            changes["water"] = dataclasses.replace(w, radial_m_s=w.radial_m_s[rows])
+        if tr is not None:
+            changes["truth"] = dataclasses.replace(tr, vessel_velocity_m_s=tr.vessel_velocity_m_s[rows],
+                                                   water_velocity_m_s=take(tr.water_velocity_m_s),
+                                                   moving_bed_velocity_m_s=take(tr.moving_bed_velocity_m_s))
+        return self.replace(**changes)
+
     def depth_of_ranges(self) -> np.ndarray | None:
         """The per-ping water depth the ranges give by the importers' rule (:func:`depth_from_vertical_ranges`,
         vertical range = slant range x |beam z|); None without ranges."""

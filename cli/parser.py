@@ -194,6 +194,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="lever-arm constraints: paper (Janus conditions relaxed), exact (equalities), minimal "
                             "(r_i = Lambda T_i + P), free (twelve coordinates)")
         s.add_argument("--starts", type=count, default=24, help="multistart size")
+        s.add_argument("--screen-pings", type=int, default=2000, metavar="N",
+                       help="runs of twice N pings or more (without a velocity per ping): every start solved on every "
+                            "k-th ping, about N in all, the best of them then on all pings; 0: every start on all pings")
         s.add_argument("--seed", type=seed, default=0, help="seed of the start design")
         s.add_argument("--method", default="joint", choices=["joint", "two-stage"],
                        help="joint (one NLP) or two-stage (the paper's)")

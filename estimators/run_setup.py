@@ -147,6 +147,21 @@ class RunSetup:
             setattr(other, name, float(value))
         return other
 
+    def thinned(self, every: int) -> "RunSetup":
+        """This run on every ``every``-th ping (the last kept, so the span and the knots stay) and every
+        ``every``-th of its reference samples: the same unknowns on fewer rows (a long calibration's
+        multistart screens its starts so). The smoothed samples are kept, not derived again."""
+        n = self.case.pings.n
+        rows = np.unique(np.append(np.arange(0, n, every), n - 1))
+        other = copy.copy(self)
+        other.case = self.case.ping_subset(rows)
+        other.depth_from_ranges = other.case.depth_from_ranges()
+        if self.section_position is not None:
+            other.section_position = self.section_position[rows]
+        if self.reference_rows is not None:
+            other.reference_rows = self.reference_rows[::every]
+        return other
+
     def covered(self, times) -> np.ndarray:
         """Rows the beams' attitude covers: all with a motion model; with the sensor's samples only
         those inside the samples' span (samples are interpolated, never extrapolated: a ping 0.14 s

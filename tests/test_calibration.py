@@ -796,3 +796,33 @@ def test_projected_mode_fit_is_the_joint_fit():
     assert abs(projected.cost / full.cost - 1) < 1e-9
     assert np.allclose(projected.x, full.x[:4], rtol=1e-6, atol=1e-8)
     assert np.allclose(fit.coefficients(projected.x), full.x[4:].reshape(5, 2), rtol=1e-5, atol=1e-8)
+
+
+def test_a_long_run_screens_its_starts_on_every_kth_ping_and_ends_where_all_starts_would():
+    """``screen_pings``: the starts solved on every third ping (and reference sample), the best then on
+    all the data, reach the optimum every start solved on all of it reaches; the per-start table is
+    the screen's, the message says so."""
+    sc = get_scenario("pool_m0")
+    case = simulate(dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=64.0, ping_interval_s=(0.19, 0.21))),
+                    seed=2)
+    kw = dict(n_starts=3, seed=1, formulation="minimal", estimate_noise=False)
+    screened, full = (_quiet_calibrate(case, screen_pings=s, **kw) for s in (case.pings.n // 3, None))
+    assert screened.success and full.success
+    assert f"3 starts screened on 1 ping in 3 ({case.pings.n // 3 + 1} of {case.pings.n} pings)" in screened.multistart.message
+    assert "screened" not in full.multistart.message and len(screened.multistart.starts) == 3
+    assert abs(screened.objective - full.objective) <= 1e-6 * abs(full.objective)
+    se = full.x_se[np.isfinite(full.x_se)]
+    assert np.max(np.abs(screened.x - full.x)[np.isfinite(full.x_se)] / np.maximum(se, 1e-12)) < 1e-2
+    with pytest.raises(ValueError, match="CalibrationConfig.screen_pings: expected None or an integer >= 100, got 50"):
+        CalibrationConfig(screen_pings=50)
+
+
+def test_a_ping_subset_keeps_every_per_ping_array_and_the_rest_whole(lake_case):
+    rows = np.arange(0, lake_case.pings.n, 4)
+    sub = lake_case.ping_subset(rows)
+    assert sub.pings.n == rows.size and np.array_equal(sub.pings.time_s, lake_case.pings.time_s[rows])
+    assert np.array_equal(sub.pings.bt_radial_m_s, lake_case.pings.bt_radial_m_s[rows])
+    assert sub.truth.vessel_velocity_m_s.shape == (rows.size, 3)
+    if lake_case.water is not None:
+        assert sub.water.radial_m_s.shape[0] == rows.size
+    assert sub.attitude is lake_case.attitude and sub.reference is lake_case.reference

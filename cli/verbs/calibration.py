@@ -25,6 +25,9 @@ def calibration_config(args, formulation=None, one=True):
         raise ValueError(f"--compass-deviation-prior-deg {prior_deg:g}: the prior of --compass-deviation auto, not of "
                          f"--compass-deviation {args.compass_deviation} (drop it, or use --compass-deviation auto)")
     prior = {} if prior_deg is None else {"compass_deviation_prior_rad": float(np.deg2rad(prior_deg))}
+    screen = getattr(args, "screen_pings", 2000)
+    if screen != 0 and screen < 100:
+        raise ValueError(f"--screen-pings {screen}: expected 0 (every start on all pings) or at least 100 pings")
     from ...solvers.multistart import SolverOptions
 
     declination = None if args.declination_deg is None else float(np.deg2rad(args.declination_deg))
@@ -40,7 +43,7 @@ def calibration_config(args, formulation=None, one=True):
                              navigation=args.navigation, moving_bed_section_knots=args.bed_knots or 3, compass_deviation=args.compass_deviation,
                              **prior,
                              standard_errors=args.standard_errors, magnetic_declination_rad=declination,
-                             own_effects=getattr(args, "own_effects", "auto"),
+                             own_effects=getattr(args, "own_effects", "auto"), screen_pings=screen or None,
                              solver=SolverOptions(method=args.solver))
 
 

@@ -129,8 +129,14 @@ class CalibrationConfig:
         ``auto`` for problems of at least ``COMPILE_MIN_PINGS`` pings (all runs; the Jacobian then
         assembled unless ``jacobian='symbolic'``, which compiles nothing) and for shorter ones whose
         Jacobian ``auto`` assembles, ``always`` (needs ``jacobian='assembled'``) or ``never``.
+    screen_pings : int, optional
+        A long calibration's multistart: where the runs hold at least twice this many pings (and
+        no velocity per ping), every start is solved on every k-th ping of each run and every k-th
+        reference sample (about this many pings in all; the same unknowns), and the best of them
+        is then solved on all the data, once. None: every start on all the data.
     own_effects : str
-        ``auto``: one run whose beams take the sensor's samples (a real file) is then diagnosed on
+        ``auto``: one run (of at most ``own_effects.AUTO_MAX_PINGS`` pings, a warning above) whose beams take
+        the sensor's samples (a real file) is then diagnosed on
         top of the calibration and what it shows is kept with it (CALIB.json ``own_effects``), so a
         later diagnosis of it holds that and answers what changed since
         (:mod:`~adcpdyn.estimators.diagnosis.own_effects`); ``on``: a survey's runs too (one joint
@@ -166,6 +172,7 @@ class CalibrationConfig:
     standard_errors: str = "hac"
     magnetic_declination_rad: float | None = None
     own_effects: str = "auto"
+    screen_pings: int | None = 2000
     solver: SolverOptions = field(default_factory=SolverOptions)
 
     def __post_init__(self):
@@ -187,6 +194,8 @@ class CalibrationConfig:
         if self.magnetic_declination_rad is not None and not abs(float(self.magnetic_declination_rad)) <= np.pi:
             raise ValueError(f"CalibrationConfig.magnetic_declination_rad: expected a finite angle within +-pi, "
                              f"got {self.magnetic_declination_rad!r}")
+        if self.screen_pings is not None and not (isinstance(self.screen_pings, (int, np.integer)) and self.screen_pings >= 100):
+            raise ValueError(f"CalibrationConfig.screen_pings: expected None or an integer >= 100, got {self.screen_pings!r}")
         if int(self.n_starts) < 1:
             raise ValueError(f"CalibrationConfig.n_starts: expected >= 1, got {self.n_starts}")
         check_address(self.scheduler, "CalibrationConfig.scheduler")

@@ -206,6 +206,12 @@ class CalibrationProblem:
             knots = ping_knots(case) if navigation == "random_walk" else knot_times(case, config.velocity_knot_interval_s)
             runs.append(RunSetup(case, f, source, choose_timing(case, f, config.timing), knots,
                                  config.use_ranges and case.pings.bt_range_m is not None, reason, navigation=navigation))
+        self._set_up(runs)
+
+    def _set_up(self, runs: list, yaw_guess: float | None = None) -> None:
+        """The model, its unknowns and the NLP of the runs' decisions (``yaw_guess``: the yaw centre, else
+        from the runs)."""
+        config = self.config
         self.runs = runs
         self.walk = any(r.random_walk for r in runs)
         self.frame = self.cases[0].attitude.frame
@@ -214,7 +220,8 @@ class CalibrationProblem:
         self.head_yaw = bool(self.head_sensor and not self.two_stage and moving)
         installation = "head" if self.head_sensor else ("fixed" if self.two_stage else "estimate")
         self.fixed_installation = installation != "estimate" and not self.head_yaw
-        self.yaw_guess = course_offset_rad(runs) if self.head_yaw or (moving and installation == "estimate") else 0.0
+        self.yaw_guess = yaw_guess if yaw_guess is not None else (
+            course_offset_rad(runs) if self.head_yaw or (moving and installation == "estimate") else 0.0)
         self.moving_bed = self._moving_bed_choice(moving)
         self.heading_span = heading_span(runs)
         heading, prior = "off", None
@@ -468,15 +475,15 @@ class CalibrationProblem:
         cfg = self.config
         x0s = self.start_points(cfg.n_starts, cfg.seed)
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
-        make = lambda: build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
-                                    like=self.solver, residual_fun=self.residual_fun)
+        screen = self._screen()
         if cfg.scheduler != SERIAL:  # the starts on a Dask cluster, each worker building the problem itself
             from .distributed import distributed_multistart
 
             ms = distributed_multistart(self, x0s)
+        elif screen is not None:
+            ms = self._screened(screen, x0s)
         else:
-            ms = multistart(self.solver, x0s, lbz, ubz, self.lbg, self.ubg, self.parameters(), workers=cfg.workers,
-                            make_solver=make, warm_start=cfg.solver.warm_start, build_s=self.build_s)
+            ms = self._multistart(x0s)
         unsettled = None
         if cfg.estimate_noise:
             refit, rounds, moved = self._noise_fixed_point(ms, lbz, ubz)
@@ -499,6 +506,50 @@ class CalibrationProblem:
             result.warnings.append(lone + ("; or take the beams' attitude from the sensor's samples (--attitude samples)"
                                            if self.attitude_source == "model" else ""))
         return result
+
+    def _multistart(self, x0s: np.ndarray) -> MultistartResult:
+        """Every start of ``x0s`` (scaled unknowns) on this problem, ``config.workers`` at once."""
+        make = lambda: build_solver(self.nlp, self.solver_options, "calibration", residuals=self.jacobian_fun,
+                                    like=self.solver, residual_fun=self.residual_fun)
+        return multistart(self.solver, x0s, self.lbx / self.scale, self.ubx / self.scale, self.lbg, self.ubg,
+                          self.parameters(), workers=self.config.workers, make_solver=make,
+                          warm_start=self.config.solver.warm_start, build_s=self.build_s)
+
+    def _screen(self) -> "CalibrationProblem | None":
+        """This problem on every k-th ping and reference sample (:meth:`.RunSetup.thinned`, about
+        ``config.screen_pings`` pings in all, the same unknowns), whose multistart picks the one start
+        solved on all the data; None where every start is solved on all of it (short runs, one start, a
+        velocity per ping, starts on a cluster)."""
+        cfg = self.config
+        n = sum(r.case.pings.n for r in self.runs)
+        if cfg.screen_pings is None or cfg.n_starts < 2 or self.walk or cfg.scheduler != SERIAL or n < 2 * cfg.screen_pings:
+            return None
+        every = int(np.ceil(n / cfg.screen_pings))
+        screen = object.__new__(type(self))
+        screen.__dict__.update({k: self.__dict__[k] for k in ("identity", "identity_warnings", "two_stage", "fits")})
+        screen.config = dataclasses.replace(cfg, screen_pings=None)
+        runs = [r.thinned(every) for r in self.runs]
+        screen.cases = [r.case for r in runs]
+        screen._set_up(runs, yaw_guess=self.yaw_guess)
+        if screen.names != self.names:  # pragma: no cover - thinning keeps the span, the knots and the choices
+            raise RuntimeError(f"screen_pings: the thinned problem's unknowns differ ({len(screen.names)} against "
+                               f"{len(self.names)})")
+        screen.every = every
+        return screen
+
+    def _screened(self, screen: "CalibrationProblem", x0s: np.ndarray) -> MultistartResult:
+        """The starts solved on ``screen`` (:meth:`_screen`), the best of them then on all the data; the
+        per-start table is the screen's (its objectives those of the thinned rows)."""
+        picked = screen._multistart(x0s * self.scale / screen.scale)
+        lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
+        x0 = np.clip(picked.x * screen.scale / self.scale, lbz, ubz)
+        full = multistart(self.solver, x0[None, :], lbz, ubz, self.lbg, self.ubg, self.parameters(), progress=False)
+        n, n_screen = (sum(c.pings.n for c in p.cases) for p in (self, screen))
+        return dataclasses.replace(
+            full, starts=picked.starts, n_groups=picked.n_groups, fraction_at_best=picked.fraction_at_best,
+            best_start=picked.best_start, time_s=picked.time_s + full.time_s,
+            message=f"{len(x0s)} starts screened on 1 ping in {screen.every} ({n_screen} of {n} pings): {picked.message}; "
+                    f"start {picked.best_start} then solved on all of them: {full.status}")
 
     def _noise_fixed_point(self, ms: MultistartResult, lbz, ubz) -> tuple:
         """(refit, refits, largest relative move of a noise level at the last re-estimation): the noise levels

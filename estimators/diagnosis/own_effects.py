@@ -12,6 +12,10 @@ import dataclasses
 from .config import DiagnosisConfig
 from .diagnose import diagnose
 
+# pings (all runs) up to which own_effects 'auto' diagnoses a calibrated run: a 2995-ping transect's diagnosis takes
+# about 36 s (`adcpdyn bench diagnosis`), rounds of it more; at 10^5 pings it took longer than the calibration by far
+AUTO_MAX_PINGS = 5000
+
 
 def find_own_effects(cases, calibration, config: DiagnosisConfig = DiagnosisConfig(), first=None) -> dict:
     """The runs' own effects on top of ``calibration`` (a record of these runs): what their diagnosis
