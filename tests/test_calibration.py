@@ -647,7 +647,7 @@ def test_put_in_equals_casadi_substitute():
 
 
 @pytest.mark.slow  # 25 s: `make test-slow`
-def test_one_real_run_keeps_what_it_shows_on_top_of_its_calibration(tmp_path):
+def test_one_real_run_keeps_what_it_shows_on_top_of_its_calibration(tmp_path, monkeypatch):
     """A real run (beams on the sensor's samples) is diagnosed on top of its fresh calibration and what
     it shows is kept (CALIB.json ``own_effects``, read back onto the record); ``off`` skips it, and a
     survey calibrated jointly is not diagnosed unless asked (``on``: one joint diagnosis)."""
@@ -665,6 +665,12 @@ def test_one_real_run_keeps_what_it_shows_on_top_of_its_calibration(tmp_path):
     result.to_json(tmp_path / "c.json")
     assert CalibrationRecord.from_json(tmp_path / "c.json").own_effects == own
     assert api.calibrate(case, n_starts=4, own_effects="off").own_effects is None
+    monkeypatch.setattr("adcpdyn.estimators.diagnosis.own_effects.AUTO_MAX_PINGS", case.pings.n - 1)
+    long = api.calibrate(case, n_starts=4)  # a run longer than 'auto' diagnoses: said, not diagnosed
+    assert long.own_effects is None
+    assert any(w.startswith(f"own_effects: the run was not diagnosed on top of its calibration ({case.pings.n} pings")
+               for w in long.warnings)
+    monkeypatch.undo()
     halves = [api.import_file(path, end_s=90.0, name="a").case, api.import_file(path, start_s=90.0, name="b").case]
     assert api.calibrate(halves, n_starts=2).own_effects is None
     with pytest.raises(ValueError, match=r"CalibrationConfig.own_effects: expected one of \['auto', 'on', 'off'\]"):
