@@ -5,6 +5,7 @@ positions along the section)."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,6 +23,7 @@ ATTITUDE_SOURCES = ("model", "samples", "frozen")
 NAVIGATIONS = ("knots", "random_walk")
 NAVIGATION_CHOICES = NAVIGATIONS + ("auto",)  # what a user may ask for: auto decides per run
 REFERENCE_MARGIN_KNOTS = 1.0  # reference samples kept up to this many knot intervals beyond the pings
+THINNED_ATTITUDE_SEED = 0  # the attitude samples a thinned run keeps (RunSetup.thinned): the same ones every time
 
 
 def has_moving_reference(case: Case) -> bool:
@@ -149,12 +151,20 @@ class RunSetup:
 
     def thinned(self, every: int) -> "RunSetup":
         """This run on every ``every``-th ping (the last kept, so the span and the knots stay) and every
-        ``every``-th of its reference samples: the same unknowns on fewer rows (a long calibration's
-        multistart screens its starts so). The smoothed samples are kept, not derived again."""
+        ``every``-th of its reference samples, and a motion model's run a random one in ``every`` of its attitude
+        samples (every k-th would alias the modes: pool_m0's 5 samples a period): the same unknowns on fewer rows (a
+        long calibration's multistart screens its starts so). The smoothed samples are kept, not derived again."""
         n = self.case.pings.n
         rows = np.unique(np.append(np.arange(0, n, every), n - 1))
         other = copy.copy(self)
         other.case = self.case.ping_subset(rows)
+        if self.attitude_source == "model":  # its sensor rows too: a random share, whose times alias no mode
+            a, m = self.case.attitude, self.case.attitude.time_s.size
+            keep = np.random.default_rng(THINNED_ATTITUDE_SEED).choice(m, max(2, -(-m // every)), replace=False)
+            keep = np.unique(np.concatenate([[0, m - 1], keep]))
+            other.case = other.case.replace(attitude=dataclasses.replace(
+                a, time_s=a.time_s[keep], heading_rad=a.heading_rad[keep], pitch_rad=a.pitch_rad[keep],
+                roll_rad=a.roll_rad[keep]))
         other.depth_from_ranges = other.case.depth_from_ranges()
         if self.section_position is not None:
             other.section_position = self.section_position[rows]

@@ -819,6 +819,15 @@ def test_a_long_run_screens_its_starts_on_every_kth_ping_and_ends_where_all_star
     assert abs(screened.objective - full.objective) <= 1e-6 * abs(full.objective)
     se = full.x_se[np.isfinite(full.x_se)]
     assert np.max(np.abs(screened.x - full.x)[np.isfinite(full.x_se)] / np.maximum(se, 1e-12)) < 1e-2
+    problem = CalibrationProblem(case, CalibrationConfig(screen_pings=case.pings.n // 3, **kw))
+    screen = problem._screen()
+    run, thin = problem.runs[0], screen.runs[0]
+    assert screen.every == 3 and screen.names == problem.names and np.array_equal(thin.knots, run.knots)
+    assert np.array_equal(thin.case.pings.time_s, case.pings.time_s[np.r_[0:case.pings.n:3, case.pings.n - 1]])
+    if run.attitude_source == "model":  # a random third of the sensor's samples, the first and last kept
+        t, kept = case.attitude.time_s, thin.case.attitude.time_s
+        assert kept[0] == t[0] and kept[-1] == t[-1] and np.all(np.isin(kept, t)) and abs(kept.size - t.size / 3) <= 3
+        assert np.std(np.diff(kept)) > 0.3 * np.mean(np.diff(kept))  # not every third: no aliasing comb
     with pytest.raises(ValueError, match="CalibrationConfig.screen_pings: expected None or an integer >= 100, got 50"):
         CalibrationConfig(screen_pings=50)
 

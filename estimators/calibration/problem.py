@@ -543,7 +543,8 @@ class CalibrationProblem:
         picked = screen._multistart(x0s * self.scale / screen.scale)
         lbz, ubz = self.lbx / self.scale, self.ubx / self.scale
         x0 = np.clip(picked.x * screen.scale / self.scale, lbz, ubz)
-        full = multistart(self.solver, x0[None, :], lbz, ubz, self.lbg, self.ubg, self.parameters(), progress=False)
+        # from a solution of the same unknowns, as the noise refit is: IPOPT's barrier need not walk down from a cold start's
+        full = multistart(self._refit_solver(), x0[None, :], lbz, ubz, self.lbg, self.ubg, self.parameters(), progress=False)
         n, n_screen = (sum(c.pings.n for c in p.cases) for p in (self, screen))
         return dataclasses.replace(
             full, starts=picked.starts, n_groups=picked.n_groups, fraction_at_best=picked.fraction_at_best,
