@@ -430,12 +430,11 @@ def calibrate(cases, config: "CalibrationConfig | None" = None, *, progress: Cal
         from .estimators.diagnosis.own_effects import AUTO_MAX_PINGS
 
         n_pings = sum(s.case.pings.n for s in sources)
-        wanted = config.own_effects == "on" or n_pings <= AUTO_MAX_PINGS
-        if not wanted:
+        if config.own_effects == "auto" and n_pings > AUTO_MAX_PINGS:
             result.warnings.append(f"own_effects: the run was not diagnosed on top of its calibration ({n_pings} pings, "
                                    f"above the {AUTO_MAX_PINGS} of own_effects 'auto'; 'on' diagnoses it, which takes "
                                    "minutes, or diagnose windows of it with this calibration)")
-    if wanted and result.success and result.attitude_source == "samples":
+            return result
         say("diagnosing the runs on top of the calibration: what they show of their own")
         result.own_effects = _own_effects(sources, result)
     return result

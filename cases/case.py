@@ -144,6 +144,11 @@ class Attitude:
         t = np.asarray(self.time_s, dtype=float)[ok]
         return np.column_stack([np.interp(times, t, ypr[:, j]) for j in range(3)])
 
+    def subset(self, rows) -> "Attitude":
+        """The samples ``rows`` (a mask or indices)."""
+        return dataclasses.replace(self, time_s=self.time_s[rows], heading_rad=self.heading_rad[rows],
+                                   pitch_rad=self.pitch_rad[rows], roll_rad=self.roll_rad[rows])
+
     def complete(self) -> np.ndarray:
         """(M,) True where heading, pitch and roll are all finite (NaN: a missing sample)."""
         return np.isfinite(self.heading_rad) & np.isfinite(self.pitch_rad) & np.isfinite(self.roll_rad)
@@ -268,7 +273,8 @@ class Case:
         rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, dtype=int)
         p, env, w, tr = self.pings, self.environment, self.water, self.truth
         take = lambda a: None if a is None else np.asarray(a)[rows]
-        changes = {"pings": Pings(time_s=p.time_s[rows], bt_radial_m_s=p.bt_radial_m_s[rows], bt_range_m=take(p.bt_range_m)),
+        changes = {"pings": dataclasses.replace(p, time_s=p.time_s[rows], bt_radial_m_s=p.bt_radial_m_s[rows],
+                                                bt_range_m=take(p.bt_range_m)),
                    "environment": dataclasses.replace(env, water_depth_per_ping_m=take(env.water_depth_per_ping_m))}
         if w is not None:
             changes["water"] = dataclasses.replace(w, radial_m_s=w.radial_m_s[rows])

@@ -24,10 +24,6 @@ def _span(t: np.ndarray, tol: float) -> str:
     return f"[{t[0]:.6g}, {t[-1]:.6g}] s (+- {tol:.3g} s)"
 
 
-def _rows(x, keep):
-    return None if x is None else np.asarray(x)[keep]
-
-
 def restrict_to_coverage(case: Case, source: str | None = None,
                          max_dropped_fraction: float = MAX_DROPPED_FRACTION) -> tuple[Case, str | None]:
     """The case restricted to what its attitude record covers, and a one-line note of what was left out.
@@ -73,8 +69,7 @@ def restrict_to_coverage(case: Case, source: str | None = None,
                          f"attitude is interpolated or fitted between samples), got {int(complete.sum())}")
     if not complete.all():
         n_bad = int((~complete).sum())
-        a = dataclasses.replace(a, time_s=a.time_s[complete], heading_rad=a.heading_rad[complete],
-                                pitch_rad=a.pitch_rad[complete], roll_rad=a.roll_rad[complete])
+        a = a.subset(complete)
         notes.append(f"{n_bad} of {complete.size} attitude samples with a NaN angle left out")
     ta = a.time_s
     tol = time_tolerance_s(ta)
@@ -93,17 +88,8 @@ def restrict_to_coverage(case: Case, source: str | None = None,
     if n_out:
         notes.append(f"{n_out} of {t.size} pings outside the attitude record {_span(ta, tol)} left out "
                      "(the attitude is never extrapolated)")
-        changes["pings"] = dataclasses.replace(p, time_s=t[keep], bt_radial_m_s=p.bt_radial_m_s[keep],
-                                               bt_range_m=_rows(p.bt_range_m, keep))
-        env = case.environment
-        if env.water_depth_per_ping_m is not None:
-            changes["environment"] = dataclasses.replace(env, water_depth_per_ping_m=env.water_depth_per_ping_m[keep])
-        if case.water is not None:
-            changes["water"] = dataclasses.replace(case.water, radial_m_s=case.water.radial_m_s[keep])
-        if case.truth is not None:
-            tr = case.truth
-            changes["truth"] = dataclasses.replace(tr, vessel_velocity_m_s=tr.vessel_velocity_m_s[keep],
-                                                   water_velocity_m_s=_rows(tr.water_velocity_m_s, keep))
+        kept = case.ping_subset(keep)
+        changes.update(pings=kept.pings, environment=kept.environment, water=kept.water, truth=kept.truth)
         t = t[keep]
     if not complete.all():
         changes["attitude"] = a

@@ -5,7 +5,6 @@ positions along the section)."""
 from __future__ import annotations
 
 import copy
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -159,12 +158,9 @@ class RunSetup:
         other = copy.copy(self)
         other.case = self.case.ping_subset(rows)
         if self.attitude_source == "model":  # its sensor rows too: a random share, whose times alias no mode
-            a, m = self.case.attitude, self.case.attitude.time_s.size
+            m = self.case.attitude.time_s.size
             keep = np.random.default_rng(THINNED_ATTITUDE_SEED).choice(m, max(2, -(-m // every)), replace=False)
-            keep = np.unique(np.concatenate([[0, m - 1], keep]))
-            other.case = other.case.replace(attitude=dataclasses.replace(
-                a, time_s=a.time_s[keep], heading_rad=a.heading_rad[keep], pitch_rad=a.pitch_rad[keep],
-                roll_rad=a.roll_rad[keep]))
+            other.case = other.case.replace(attitude=self.case.attitude.subset(np.unique(np.concatenate([[0, m - 1], keep]))))
         other.depth_from_ranges = other.case.depth_from_ranges()
         if self.section_position is not None:
             other.section_position = self.section_position[rows]
