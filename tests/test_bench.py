@@ -18,6 +18,27 @@ def test_growth_exponent_recovers_a_power_law():
     assert abs(b - 1.3) < TOL_EXPONENT and abs(a - 3.0) < 1e-6
 
 
+def test_largest_pair_is_timed_by_turns_and_its_fastest_taken(monkeypatch):
+    """The two largest sizes' saved cases are calibrated alternately; each size's fastest gives the exponent,
+    and a failed run is reported, not fitted."""
+    from adcpdyn.benchmarks import scale
+
+    order, times = [], {"a.h5": iter([2.0, 1.0, 1.5]), "b.h5": iter([9.0, 8.0, 4.0])}
+
+    def worker(module, args, limit):
+        assert module == "scale_worker" and args[0] == "--time"
+        order.append(args[1])
+        return {"calibration_s": next(times[args[1]])}, None
+
+    monkeypatch.setattr(scale, "run_worker", worker)
+    pair = scale.repeated_pair([{"n_pings": 100}, {"n_pings": 400}], ["a.h5", "b.h5"], 3, 60.0)
+    assert order == ["a.h5", "b.h5"] * 3
+    assert pair["fastest_s"] == [1.0, 4.0] and abs(pair["exponent"] - 1.0) < TOL_EXPONENT
+    monkeypatch.setattr(scale, "run_worker", lambda *a: (None, "exceeded the time limit of 60 s"))
+    failed = scale.repeated_pair([{"n_pings": 100}, {"n_pings": 400}], ["a.h5", "b.h5"], 3, 60.0)
+    assert "exponent" not in failed and "100 pings: exceeded" in failed["failed"]
+
+
 def test_mumps_loads_and_a_missing_solver_says_why():
     ok, note = probe_linear_solver("mumps")
     assert ok, note
