@@ -180,6 +180,36 @@ def test_another_workers_solver_is_built_only_when_it_pays():
     assert worth_building(1.0, 7, 2, 3.0) and not worth_building(0.5, 7, 2, 2.0) and worth_building(0.1, 1, 2, None)
 
 
+def test_starts_in_worker_threads_run_blas_on_one_thread():
+    """While starts run in threads of their own, numpy's and scipy's BLAS take one thread each (their own
+    threads would spin beside the workers); a lone worker leaves BLAS as it was, and so does the end."""
+    from threadpoolctl import threadpool_info
+
+    from adcpdyn.solvers.multistart import run_starts
+
+    def blas_threads():
+        return sorted({lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"})
+
+    seen = []
+
+    class Recording:
+        def __call__(self, x0, **kw):
+            seen.append(blas_threads())
+            return {"f": float(np.sum(x0**2)), "x": x0, "lam_g": np.zeros(0), "g": np.zeros(0), "lam_x": 0 * x0}
+
+        def stats(self):
+            return {"return_status": "Solve_Succeeded", "success": True, "iter_count": 1}
+
+    before = blas_threads()
+    x0s = np.arange(8.0).reshape(4, 2)
+    args = (x0s, -np.inf, np.inf, np.zeros(0), np.zeros(0), np.zeros(0))
+    run_starts(Recording(), *args, progress=False, workers=2, make_solver=Recording)
+    assert seen == [[1]] * 4 and blas_threads() == before
+    seen.clear()
+    run_starts(Recording(), *args, progress=False, workers=1, make_solver=Recording)
+    assert seen == [before] * 4
+
+
 def test_the_gauss_newton_hessian_is_dense_only_for_few_velocity_columns():
     """J^T J formed dense from an assembled Jacobian's blocks for a few thousand unknowns whose runs
     hold few velocity columns each (knots: twenty transects, 1897 unknowns, 42.5 s dense, 49.2 s
