@@ -38,6 +38,10 @@ DENSE_NYQUIST_FRACTION = 0.75  # long records sampled this densely get FFT candi
 COARSE_MAX_FREQUENCIES = 16384
 COARSE_WINDOWS = 3
 COARSE_WINDOW_FREQUENCIES = 8192  # each window's own grid: about 1600 s long at 16 rad/s
+# the modes' nonlinear refinement takes at most this many of a record's samples (a random share, seeded); amplitudes,
+# residuals and BIC are those of every sample
+MODE_FIT_SAMPLES = 20_000
+MODE_FIT_SEED = 0
 
 
 @dataclass(frozen=True)
@@ -227,7 +231,10 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
     decay comes from a small grid with every axis' (bias, C, S) by linear least
     squares; then all frequencies, decays and amplitudes are refined by nonlinear
     least squares (:class:`_ProjectedModes`). A mode is kept while BIC drops by more than ``BIC_MARGIN``
-    (``fixed_modes`` skips the criterion).
+    (``fixed_modes`` skips the criterion). A record of more than :data:`MODE_FIT_SAMPLES` samples refines its
+    frequencies and decays on a random share of that many (the first and last kept; every k-th would alias
+    the modes), its amplitudes, residuals and BIC on every sample (an 18-hour river run of 10^5 samples:
+    the refinement's three solves 2.5 s of its 4.2 s).
     """
     t = np.asarray(t, dtype=float)
     Y = np.atleast_2d(np.asarray(Y, dtype=float).T).T
@@ -236,9 +243,14 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
     lo, hi = omega_band or (max(2 * np.pi * 2 / duration, 0.2), resolved_omega(t))
     scale = np.maximum(np.std(Y, axis=0), 1e-6)
     modes = np.zeros((0, 2))
-    fit = _ProjectedModes(t, Y, t_ref, scale)
-    coef = fit.coefficients(modes.reshape(-1))  # (1 + 2n, A)
-    rss = float(np.sum(fit.residuals(modes.reshape(-1)) ** 2))
+    full = _ProjectedModes(t, Y, t_ref, scale)
+    fit = full
+    if M > MODE_FIT_SAMPLES:
+        keep = np.random.default_rng(MODE_FIT_SEED).choice(np.arange(1, M - 1), MODE_FIT_SAMPLES - 2, replace=False)
+        sub = np.concatenate([[0], np.sort(keep), [M - 1]])
+        fit = _ProjectedModes(t[sub], Y[sub], t_ref, scale)  # the refinement's samples
+    coef = full.coefficients(modes.reshape(-1))  # (1 + 2n, A)
+    rss = float(np.sum(full.residuals(modes.reshape(-1)) ** 2))
     trail = [{"modes": 0, "bic": _bic(rss, M * A, A)}]
     target = fixed_modes if fixed_modes is not None else max_modes
     for k in range(1, target + 1):
@@ -251,8 +263,8 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
         lower, upper = np.tile([lo, 0.0], k), np.tile([hi, MAX_DECAY_1_S], k)
         sol = least_squares(fit.residuals, np.clip(trial, lower, upper), jac=fit.jacobian,
                             bounds=(lower, upper), x_scale="jac")
-        c = fit.coefficients(sol.x)  # (1 + 2k, A)
-        rss_k = float(2 * sol.cost)
+        c = full.coefficients(sol.x)  # (1 + 2k, A)
+        rss_k = float(2 * sol.cost) if fit is full else float(np.sum(full.residuals(sol.x) ** 2))
         bic_k = _bic(rss_k, M * A, 2 * k + A * (1 + 2 * k))
         trail.append({"modes": k, "bic": bic_k})
         cs = c[1:].T.reshape(A, k, 2)  # per axis, per mode: (C, S)

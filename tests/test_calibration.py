@@ -770,6 +770,27 @@ def test_attitude_prefit_searches_regular_samples_up_to_their_nyquist_only():
     assert np.all(np.hypot(f.cs[..., 0], f.cs[..., 1]) < MAX_TILT_AMPLITUDE_RAD)
 
 
+def test_a_long_records_modes_are_refined_on_a_share_of_its_samples(monkeypatch):
+    """Beyond MODE_FIT_SAMPLES samples the modes' frequencies and decays are refined on a random share, the
+    amplitudes and residual levels on every sample: the modes as the truth's within their spread, the levels
+    as the whole record's fit gives them."""
+    from adcpdyn.estimators import attitude_fit
+    from adcpdyn.estimators.attitude_fit import _design, fit_modes
+
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(0.0, 600.0, 6000))
+    truth = np.array([[1.1, 0.0], [2.7, 0.0]])
+    coef = np.array([[0.01, -0.02], [0.03, 0.01], [-0.02, 0.015], [0.012, 0.0], [0.004, -0.01]])
+    Y = _design(t, truth, 0.0) @ coef + 0.003 * rng.standard_normal((t.size, 2))
+    whole = fit_modes(t, Y, 0.0, max_modes=2)
+    monkeypatch.setattr(attitude_fit, "MODE_FIT_SAMPLES", 1500)
+    share = fit_modes(t, Y, 0.0, max_modes=2)
+    order = np.argsort(share.modes[:, 0])
+    assert share.modes.shape == (2, 2)
+    assert np.all(np.abs(share.modes[order, 0] - truth[:, 0]) < 2e-3)  # the modes' SE here ~1e-4 rad/s on 1500
+    assert np.allclose(share.sigmas, whole.sigmas, rtol=0.01) and np.allclose(share.sigmas, 0.003, rtol=0.05)
+
+
 def test_projected_mode_fit_is_the_joint_fit():
     """The pre-fit refines only the modes' frequencies and decays (variable projection): the gradient of
     its Jacobian (Kaufman's) against central differences of its residuals, and its optimum against
