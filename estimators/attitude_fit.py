@@ -44,6 +44,15 @@ MODE_FIT_SAMPLES = 20_000
 MODE_FIT_SEED = 0
 
 
+def random_share(n: int, count: int, seed: int) -> np.ndarray:
+    """``count`` (at least 2) of the indices 0..n-1 drawn at random (seeded), sorted, the first and last
+    among them: a share of a record's samples whose times alias no mode, as every k-th would."""
+    if count >= n:
+        return np.arange(n)
+    inner = np.random.default_rng(seed).choice(np.arange(1, n - 1), max(count, 2) - 2, replace=False)
+    return np.concatenate([[0], np.sort(inner), [n - 1]])
+
+
 @dataclass(frozen=True)
 class ModeFit:
     """Shared modes (n, 2) = (omega, decay) and, per axis, bias and (C, S) (n, 2)."""
@@ -232,9 +241,9 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
     squares; then all frequencies, decays and amplitudes are refined by nonlinear
     least squares (:class:`_ProjectedModes`). A mode is kept while BIC drops by more than ``BIC_MARGIN``
     (``fixed_modes`` skips the criterion). A record of more than :data:`MODE_FIT_SAMPLES` samples refines its
-    frequencies and decays on a random share of that many (the first and last kept; every k-th would alias
-    the modes), its amplitudes, residuals and BIC on every sample (an 18-hour river run of 10^5 samples:
-    the refinement's three solves 2.5 s of its 4.2 s).
+    frequencies and decays on a random share of that many (:func:`random_share`), its amplitudes, residuals
+    and BIC on every sample (an 18-hour river run of 10^5 samples: the refinement's three solves had taken
+    2.5 s of its 4.2 s).
     """
     t = np.asarray(t, dtype=float)
     Y = np.atleast_2d(np.asarray(Y, dtype=float).T).T
@@ -246,8 +255,7 @@ def fit_modes(t, Y, t_ref: float, max_modes: int = 3, fixed_modes: int | None = 
     full = _ProjectedModes(t, Y, t_ref, scale)
     fit = full
     if M > MODE_FIT_SAMPLES:
-        keep = np.random.default_rng(MODE_FIT_SEED).choice(np.arange(1, M - 1), MODE_FIT_SAMPLES - 2, replace=False)
-        sub = np.concatenate([[0], np.sort(keep), [M - 1]])
+        sub = random_share(M, MODE_FIT_SAMPLES, MODE_FIT_SEED)
         fit = _ProjectedModes(t[sub], Y[sub], t_ref, scale)  # the refinement's samples
     coef = full.coefficients(modes.reshape(-1))  # (1 + 2n, A)
     rss = float(np.sum(full.residuals(modes.reshape(-1)) ** 2))

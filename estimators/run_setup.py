@@ -13,7 +13,7 @@ from ..cases.case import Case
 from ..models.motion import SampledAttitude
 from ..models.rotations import course_difference_rad
 from .asc import asc
-from .attitude_fit import AttitudeFit, sampled_attitude
+from .attitude_fit import AttitudeFit, random_share, sampled_attitude
 from .knots import random_walk_intensity, vertical_velocity_level
 from .noise_guess import initial_noise
 
@@ -159,8 +159,8 @@ class RunSetup:
         other.case = self.case.ping_subset(rows)
         if self.attitude_source == "model":  # its sensor rows too: a random share, whose times alias no mode
             m = self.case.attitude.time_s.size
-            keep = np.random.default_rng(THINNED_ATTITUDE_SEED).choice(m, max(2, -(-m // every)), replace=False)
-            other.case = other.case.replace(attitude=self.case.attitude.subset(np.unique(np.concatenate([[0, m - 1], keep]))))
+            other.case = other.case.replace(attitude=self.case.attitude.subset(
+                random_share(m, -(-m // every) + 2, THINNED_ATTITUDE_SEED)))
         other.depth_from_ranges = other.case.depth_from_ranges()
         if self.section_position is not None:
             other.section_position = self.section_position[rows]
