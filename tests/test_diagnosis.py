@@ -57,6 +57,14 @@ def test_each_effect_is_injected_and_recorded(name):
     assert any(changed)
 
 
+def test_runs_of_one_name_are_refused_in_one_line(pool_m0):
+    """A survey's runs are keyed by name (two windows read back from their files share the file's): two of one
+    name are refused with the names, as the joint calibration refuses them, not left to collide in the model."""
+    case = simulate(pool_m0, seed=3)
+    with pytest.raises(ValueError, match=r"cases: expected distinct case names .*'pool_m0', 'pool_m0'"):
+        diagnose([case, case.replace(attitude=case.attitude)], DiagnosisConfig(effects=("heave",)))
+
+
 def test_leave_fold_out_step_is_exact_for_a_linear_model():
     """One Gauss-Newton step from the full fit = refitting without the fold (linear LS); each
     prediction divided by sqrt(1 + h), h = a (A_t^T A_t)^-1 a^T its leverage (closed form)."""
