@@ -292,3 +292,11 @@ class Case:
         cos_b = np.abs(self.instrument.beam_directions()[:, 2])
         return depth_from_vertical_ranges(self.pings.time_s, np.asarray(self.pings.bt_range_m, dtype=float) * cos_b[None, :],
                                           self.environment.transducer_depth_m)
+
+
+def check_distinct_names(cases) -> None:
+    """Raise one line unless the runs' names differ: a survey's runs, their results and channels are keyed by
+    them (two windows of one file, each read back from its own file, keep the file's name)."""
+    names = [c.name for c in cases]
+    if len(set(names)) != len(names):
+        raise ValueError(f"cases: expected distinct case names (a survey's runs are keyed by them), got {names}")

@@ -63,6 +63,10 @@ def test_runs_of_one_name_are_refused_in_one_line(pool_m0):
     case = simulate(pool_m0, seed=3)
     with pytest.raises(ValueError, match=r"cases: expected distinct case names .*'pool_m0', 'pool_m0'"):
         diagnose([case, case.replace(attitude=case.attitude)], DiagnosisConfig(effects=("heave",)))
+    from adcpdyn.estimators.calibration.problem import CalibrationProblem
+
+    with pytest.raises(ValueError, match=r"cases: expected distinct case names .*'pool_m0', 'pool_m0'"):
+        CalibrationProblem([case, case])
 
 
 def test_leave_fold_out_step_is_exact_for_a_linear_model():

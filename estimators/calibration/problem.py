@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.stats import qmc
 
-from ...cases.case import Case
+from ...cases.case import Case, check_distinct_names
 from ...cases.identity import identity_of, instrument_difference, site_differences, site_of
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ...models.rotations import euler_matrix
@@ -187,12 +187,10 @@ class CalibrationProblem:
         self.cases = [cases] if isinstance(cases, Case) else list(cases)
         if not self.cases:
             raise ValueError("cases: expected at least one case")
-        names = [c.name for c in self.cases]
         for case in self.cases:
             if case.pings.n < MIN_PINGS:
                 raise ValueError(f"{case.name}: /pings/time_s: expected at least {MIN_PINGS} pings to calibrate, got {case.pings.n}")
-        if len(set(names)) != len(names):
-            raise ValueError(f"cases: expected distinct case names (results are keyed by them), got {names}")
+        check_distinct_names(self.cases)
         self.identity, self.identity_warnings = _one_instrument(self.cases)
         self.config = config
         self.two_stage = config.method == "two-stage"

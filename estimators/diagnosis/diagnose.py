@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...cases.case import Case
+from ...cases.case import Case, check_distinct_names
 from ...models.effects import effect_of
 from ...models.motion import AttitudeParams, evaluate_attitude
 from ..calibration.record import CalibrationRecord
@@ -95,9 +95,7 @@ def diagnose(cases, config: DiagnosisConfig = DiagnosisConfig(), calibration: Ca
     """Diagnose the gap between the base model and one case (or several runs of one boat), blind
     to its truth; with a calibration (the typed record), its platform quantities are pinned."""
     cases = [cases] if isinstance(cases, Case) else list(cases)
-    names = [c.name for c in cases]
-    if len(set(names)) != len(names):  # a joint model keys its channels by run (two windows of one file share a name)
-        raise ValueError(f"cases: expected distinct case names (the runs' channels are keyed by them), got {names}")
+    check_distinct_names(cases)
     for case in cases:
         if case.pings.n < MIN_PINGS:
             raise ValueError(f"{case.name}: /pings/time_s: expected at least {MIN_PINGS} pings for the gap diagnosis "
